@@ -1,0 +1,16 @@
+//! Compiles `fastrack/v1/*.proto` with protox (no system protoc) and writes the descriptor set that the
+//! server's reflection service publishes.
+use prost::Message;
+use std::path::PathBuf;
+
+fn main() -> Result<(), Box<dyn std::error::Error>> {
+    let files = ["fastrack/v1/models.proto", "fastrack/v1/safety.proto"];
+    for file in files {
+        println!("cargo:rerun-if-changed={file}");
+    }
+    let fds = protox::compile(files, ["."])?;
+    let out_dir = PathBuf::from(std::env::var("OUT_DIR")?);
+    std::fs::write(out_dir.join("fastrack_descriptor.bin"), fds.encode_to_vec())?;
+    tonic_prost_build::configure().compile_fds(fds)?;
+    Ok(())
+}

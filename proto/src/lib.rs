@@ -1,0 +1,15 @@
+//! The `fastrack.v1` gRPC contract, generated from `proto/fastrack/v1/*.proto`.
+
+/// Generated messages and stubs of package `fastrack.v1`.
+pub mod v1 {
+    #![allow(
+        missing_docs,
+        clippy::doc_lazy_continuation,
+        clippy::large_enum_variant
+    )]
+    tonic::include_proto!("fastrack.v1");
+}
+
+/// Encoded `FileDescriptorSet` of the contract, for server reflection.
+pub const FILE_DESCRIPTOR_SET: &[u8] =
+    include_bytes!(concat!(env!("OUT_DIR"), "/fastrack_descriptor.bin"));

@@ -1,0 +1,19 @@
+//! Value-function models shared by every fastrack crate.
+//!
+//! - [`system`]: control- and planner-affine relative systems (`dubins4d`, the double integrator).
+//! - [`network`]: the SIREN value network and its f64 reference evaluation.
+//! - [`manifest`], [`bundle`]: the model bundle format and repository layout.
+//! - [`teb`]: TEB tables from a value function (`V_min` per `beta`, extent, boundary).
+//! - `onnx_writer` (feature `writer`): the network plus control law as an ONNX graph.
+//! - `runtime` (feature `runtime`): ONNX Runtime loading and a pooled batch evaluator.
+
+pub mod bundle;
+pub mod manifest;
+pub mod network;
+pub mod system;
+pub mod teb;
+
+#[cfg(feature = "writer")]
+pub mod onnx_writer;
+#[cfg(feature = "runtime")]
+pub mod runtime;

@@ -1,0 +1,507 @@
+//! `manifest.json` of a model bundle: versioned schema, serde types and validation with precise errors.
+
+use crate::system::AffineSystem;
+use serde::{Deserialize, Serialize};
+use std::collections::BTreeMap;
+
+/// Schema version written by this crate and the only one it accepts.
+pub const SCHEMA_VERSION: u32 = 1;
+
+/// Minimum number of rows of a TEB table.
+pub const MIN_TEB_ROWS: usize = 16;
+
+/// Everything the server needs to know about a bundle, with no knowledge of the robot behind it.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Manifest {
+    /// Schema version, [`SCHEMA_VERSION`].
+    pub schema_version: u32,
+    /// Model name (the repository folder).
+    pub name: String,
+    /// Model version (the version folder), positive.
+    pub version: u32,
+    /// The system the value function belongs to.
+    pub system: SystemInfo,
+    /// Relative-state coordinates, in input order.
+    pub state: Vec<StateDimension>,
+    /// `Q`, `n_state` rows of `planner_dim` entries: `r = s - Q p`.
+    pub planner_to_state: Vec<Vec<f64>>,
+    /// Parameters (planner speed bounds), in input order.
+    pub params: Vec<RangeDimension>,
+    /// Tracker controls, in output order.
+    pub controls: Vec<RangeDimension>,
+    /// Horizon `tau` (s) fixed inside the graph.
+    pub horizon: f64,
+    /// The network the graph was written from.
+    pub network: NetworkInfo,
+    /// TEB table, rows by increasing `beta`.
+    pub teb_table: Vec<TebRow>,
+    /// True for a bundle written from an untrained (random) network.
+    pub untrained: bool,
+    /// Where the model came from.
+    pub provenance: Provenance,
+    /// SHA-256 of `model.onnx`, lowercase hex.
+    pub onnx_sha256: String,
+}
+
+/// System identity.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SystemInfo {
+    /// System id, e.g. `dubins4d`.
+    pub id: String,
+    /// Description.
+    pub description: String,
+}
+
+/// One relative-state coordinate.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct StateDimension {
+    /// Name.
+    pub name: String,
+    /// Unit.
+    pub unit: String,
+    /// Domain lower end.
+    pub min: f64,
+    /// Domain upper end.
+    pub max: f64,
+    /// Wrapped into `[min, max)` instead of rejected.
+    pub periodic: bool,
+    /// Part of the tracking error `l(r)`.
+    pub error_coordinate: bool,
+}
+
+/// A named quantity with a closed range (parameter or control).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct RangeDimension {
+    /// Name.
+    pub name: String,
+    /// Unit.
+    pub unit: String,
+    /// Lower end.
+    pub min: f64,
+    /// Upper end.
+    pub max: f64,
+}
+
+/// Description of the network inside the graph.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NetworkInfo {
+    /// Architecture, `siren`.
+    pub kind: String,
+    /// Hidden layer widths.
+    pub hidden: Vec<usize>,
+    /// SIREN frequency `omega_0`.
+    pub omega_0: f64,
+    /// `V = l(r) + tau * NN` (exact boundary condition) instead of `V = NN`.
+    pub exact_boundary: bool,
+}
+
+/// One row of the TEB table.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TebRow {
+    /// Planner speed bound (every parameter equal to it).
+    pub beta: f64,
+    /// Conservative level `V_min` (monotone in `beta`).
+    pub level: f64,
+    /// The smallest value found by the search at this `beta`, before monotone correction.
+    pub measured_min: f64,
+    /// Half-widths of the error set's bounding box along each error coordinate.
+    pub extent: Vec<f64>,
+    /// Radii of the error set's projection along [`boundary_directions`] (for drawing).
+    pub boundary_radii: Vec<f64>,
+    /// Scenario verification of this row, once run.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub verification: Option<Verification>,
+}
+
+impl TebRow {
+    /// The level a server serves: `max(level, verified_level)`.
+    pub fn served_level(&self) -> f64 {
+        match &self.verification {
+            Some(v) => self.level.max(v.verified_level),
+            None => self.level,
+        }
+    }
+}
+
+/// Scenario-based verification of one TEB row (Lin & Bansal).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Verification {
+    /// Corrected level: the largest error reached from the sampled sublevel set.
+    pub verified_level: f64,
+    /// Violation-probability bound epsilon.
+    pub eps: f64,
+    /// Confidence parameter delta.
+    pub delta: f64,
+    /// Number of sampled states.
+    pub samples: usize,
+    /// Samples whose rollout exceeded the learned level.
+    pub violations: usize,
+    /// Rollout horizon (s).
+    pub horizon: f64,
+    /// Integration step (s).
+    pub step: f64,
+}
+
+/// Training provenance.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Provenance {
+    /// How the weights were made, e.g. `random-init` or `deepreach`.
+    pub method: String,
+    /// The full configuration used.
+    pub config: serde_json::Value,
+    /// Training iterations (0 for untrained).
+    pub iterations: u64,
+    /// Final loss terms by name.
+    pub final_losses: BTreeMap<String, f64>,
+    /// Wall time of training (s).
+    pub wall_time_s: f64,
+    /// Machine description (cores, CPU model).
+    pub machine: String,
+    /// Source revision (git) of the code that made the bundle.
+    pub source_revision: String,
+    /// Creation time, RFC 3339.
+    pub created: String,
+}
+
+/// Directions of [`TebRow::boundary_radii`] for an error space of `n_error` dimensions: `±1` in 1-D,
+/// `count` equally spaced angles from 0 (counter-clockwise) in 2-D, none otherwise.
+pub fn boundary_directions(n_error: usize, count: usize) -> Vec<Vec<f64>> {
+    match n_error {
+        1 => vec![vec![1.0], vec![-1.0]],
+        2 => (0..count)
+            .map(|k| {
+                let a = 2.0 * std::f64::consts::PI * k as f64 / count as f64;
+                vec![a.cos(), a.sin()]
+            })
+            .collect(),
+        _ => Vec::new(),
+    }
+}
+
+/// A manifest that fails validation: which field, and what is wrong with it.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+#[error("manifest field `{field}`: {problem}")]
+pub struct ManifestError {
+    /// JSON path of the offending field.
+    pub field: String,
+    /// What is wrong and what is allowed.
+    pub problem: String,
+}
+
+fn fail<T>(field: impl Into<String>, problem: impl Into<String>) -> Result<T, ManifestError> {
+    Err(ManifestError {
+        field: field.into(),
+        problem: problem.into(),
+    })
+}
+
+fn check_range(field: &str, min: f64, max: f64, strict: bool) -> Result<(), ManifestError> {
+    if !min.is_finite() || !max.is_finite() {
+        return fail(field, format!("bounds must be finite, got [{min}, {max}]"));
+    }
+    if min > max || (strict && min == max) {
+        return fail(
+            field,
+            format!(
+                "min must be {} max, got [{min}, {max}]",
+                if strict { "<" } else { "<=" }
+            ),
+        );
+    }
+    Ok(())
+}
+
+impl Manifest {
+    /// Parses and validates manifest JSON.
+    pub fn from_json(text: &str) -> Result<Self, ManifestError> {
+        let manifest: Manifest = serde_json::from_str(text).map_err(|e| ManifestError {
+            field: "(schema)".into(),
+            problem: format!("does not match schema version {SCHEMA_VERSION}: {e}"),
+        })?;
+        manifest.validate()?;
+        Ok(manifest)
+    }
+
+    /// Serialises to pretty JSON.
+    pub fn to_json(&self) -> String {
+        serde_json::to_string_pretty(self).expect("manifest serialises")
+    }
+
+    /// Number of state coordinates.
+    pub fn n_state(&self) -> usize {
+        self.state.len()
+    }
+
+    /// Number of parameters.
+    pub fn n_params(&self) -> usize {
+        self.params.len()
+    }
+
+    /// Number of controls.
+    pub fn n_control(&self) -> usize {
+        self.controls.len()
+    }
+
+    /// Number of planner state coordinates.
+    pub fn planner_dim(&self) -> usize {
+        self.planner_to_state.first().map_or(0, Vec::len)
+    }
+
+    /// Indices of the error coordinates.
+    pub fn error_coords(&self) -> Vec<usize> {
+        (0..self.state.len())
+            .filter(|&i| self.state[i].error_coordinate)
+            .collect()
+    }
+
+    /// `[beta_l, beta_u]`: the range every parameter shares for table queries (the intersection).
+    pub fn beta_range(&self) -> (f64, f64) {
+        self.params
+            .iter()
+            .fold((f64::NEG_INFINITY, f64::INFINITY), |(lo, hi), p| {
+                (lo.max(p.min), hi.min(p.max))
+            })
+    }
+
+    /// Checks every invariant the server relies on.
+    pub fn validate(&self) -> Result<(), ManifestError> {
+        if self.schema_version != SCHEMA_VERSION {
+            return fail(
+                "schema_version",
+                format!("must be {SCHEMA_VERSION}, got {}", self.schema_version),
+            );
+        }
+        if self.name.is_empty()
+            || !self
+                .name
+                .chars()
+                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
+        {
+            return fail(
+                "name",
+                format!("must be non-empty [A-Za-z0-9_-], got {:?}", self.name),
+            );
+        }
+        if self.version == 0 {
+            return fail("version", "must be a positive integer, got 0");
+        }
+        if self.state.is_empty() {
+            return fail("state", "must list at least one coordinate");
+        }
+        for (i, dim) in self.state.iter().enumerate() {
+            check_range(
+                &format!("state[{i}] ({})", dim.name),
+                dim.min,
+                dim.max,
+                true,
+            )?;
+            if dim.periodic && dim.error_coordinate {
+                return fail(
+                    format!("state[{i}] ({})", dim.name),
+                    "an error coordinate cannot be periodic",
+                );
+            }
+        }
+        if self.error_coords().is_empty() {
+            return fail(
+                "state",
+                "at least one coordinate must be an error coordinate",
+            );
+        }
+        if self.planner_to_state.len() != self.state.len() {
+            return fail(
+                "planner_to_state",
+                format!(
+                    "must have one row per state coordinate ({}), got {}",
+                    self.state.len(),
+                    self.planner_to_state.len()
+                ),
+            );
+        }
+        let planner_dim = self.planner_dim();
+        if planner_dim == 0 {
+            return fail("planner_to_state", "rows must have at least one column");
+        }
+        for (i, row) in self.planner_to_state.iter().enumerate() {
+            if row.len() != planner_dim || row.iter().any(|x| !x.is_finite()) {
+                return fail(
+                    format!("planner_to_state[{i}]"),
+                    format!("must hold {planner_dim} finite numbers"),
+                );
+            }
+        }
+        if self.params.is_empty() {
+            return fail("params", "must list at least one parameter");
+        }
+        for (i, p) in self.params.iter().enumerate() {
+            check_range(&format!("params[{i}] ({})", p.name), p.min, p.max, true)?;
+        }
+        let (beta_l, beta_u) = self.beta_range();
+        if beta_l >= beta_u {
+            return fail(
+                "params",
+                format!(
+                    "parameter ranges must overlap, their intersection is [{beta_l}, {beta_u}]"
+                ),
+            );
+        }
+        if self.controls.is_empty() {
+            return fail("controls", "must list at least one control");
+        }
+        for (i, c) in self.controls.iter().enumerate() {
+            check_range(&format!("controls[{i}] ({})", c.name), c.min, c.max, false)?;
+        }
+        if !(self.horizon.is_finite() && self.horizon > 0.0) {
+            return fail(
+                "horizon",
+                format!("must be finite and > 0, got {}", self.horizon),
+            );
+        }
+        if self.network.omega_0 <= 0.0 || self.network.hidden.iter().any(|&w| w == 0) {
+            return fail("network", "omega_0 must be > 0 and hidden widths > 0");
+        }
+        self.validate_teb_table(beta_l, beta_u)?;
+        if self.onnx_sha256.len() != 64
+            || !self
+                .onnx_sha256
+                .chars()
+                .all(|c| c.is_ascii_hexdigit() && !c.is_ascii_uppercase())
+        {
+            return fail(
+                "onnx_sha256",
+                format!(
+                    "must be 64 lowercase hex digits, got {:?}",
+                    self.onnx_sha256
+                ),
+            );
+        }
+        Ok(())
+    }
+
+    fn validate_teb_table(&self, beta_l: f64, beta_u: f64) -> Result<(), ManifestError> {
+        let rows = &self.teb_table;
+        if rows.len() < MIN_TEB_ROWS {
+            return fail(
+                "teb_table",
+                format!("must have at least {MIN_TEB_ROWS} rows, got {}", rows.len()),
+            );
+        }
+        let tol = 1e-9 * (beta_u - beta_l);
+        if (rows[0].beta - beta_l).abs() > tol || (rows[rows.len() - 1].beta - beta_u).abs() > tol {
+            return fail(
+                "teb_table",
+                format!(
+                    "must span the parameter range [{beta_l}, {beta_u}], got [{}, {}]",
+                    rows[0].beta,
+                    rows[rows.len() - 1].beta
+                ),
+            );
+        }
+        let n_error = self.error_coords().len();
+        for (i, row) in rows.iter().enumerate() {
+            let field = format!("teb_table[{i}]");
+            if i > 0 && row.beta <= rows[i - 1].beta {
+                return fail(
+                    field,
+                    format!(
+                        "beta must increase, {} follows {}",
+                        row.beta,
+                        rows[i - 1].beta
+                    ),
+                );
+            }
+            if !(row.level.is_finite() && row.level > 0.0) {
+                return fail(
+                    field,
+                    format!("level must be finite and > 0, got {}", row.level),
+                );
+            }
+            if i > 0 && row.served_level() < rows[i - 1].served_level() {
+                return fail(
+                    field,
+                    "levels must not decrease with beta (a conservative table is monotone)",
+                );
+            }
+            if row.extent.len() != n_error || row.extent.iter().any(|x| !x.is_finite() || *x < 0.0)
+            {
+                return fail(
+                    field,
+                    format!("extent must hold {n_error} finite non-negative numbers"),
+                );
+            }
+            if row
+                .boundary_radii
+                .iter()
+                .any(|x| !x.is_finite() || *x < 0.0)
+            {
+                return fail(field, "boundary_radii must be finite and non-negative");
+            }
+            if let Some(v) = &row.verification {
+                if !v.verified_level.is_finite() || v.verified_level < 0.0 {
+                    return fail(field, "verification.verified_level must be finite and >= 0");
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// State, parameter and control metadata taken from a system definition.
+    pub fn describe_system(
+        system: &AffineSystem,
+    ) -> (
+        Vec<StateDimension>,
+        Vec<Vec<f64>>,
+        Vec<RangeDimension>,
+        Vec<RangeDimension>,
+    ) {
+        let state = system
+            .state
+            .iter()
+            .enumerate()
+            .map(|(i, d)| StateDimension {
+                name: d.name.into(),
+                unit: d.unit.into(),
+                min: d.min,
+                max: d.max,
+                periodic: d.periodic,
+                error_coordinate: system.error_coords.contains(&i),
+            })
+            .collect();
+        let q = (0..system.n_state())
+            .map(|i| {
+                (0..system.planner_dim())
+                    .map(|j| system.planner_to_state[(i, j)])
+                    .collect()
+            })
+            .collect();
+        let params = system
+            .params
+            .iter()
+            .map(|p| RangeDimension {
+                name: p.name.into(),
+                unit: p.unit.into(),
+                min: p.min,
+                max: p.max,
+            })
+            .collect();
+        let controls = system
+            .controls
+            .iter()
+            .map(|c| RangeDimension {
+                name: c.name.into(),
+                unit: c.unit.into(),
+                min: c.min,
+                max: c.max,
+            })
+            .collect();
+        (state, q, params, controls)
+    }
+}

@@ -1,0 +1,348 @@
+//! Compiles a [`ValueNetwork`] and a system's control law into the ONNX graph of the bundle contract:
+//! inputs `state [N, n_state]`, `params [N, n_params]` (physical units); outputs `value [N]`,
+//! `grad [N, n_state]` (dV/dr, an explicit backward pass through the sine layers) and
+//! `control [N, n_control]` (the box minimiser of `grad . G_u u`). The horizon is fixed inside the graph;
+//! input normalisation, `omega_0`, the output scale and `tau` are folded into the weights.
+
+use crate::network::ValueNetwork;
+use crate::system::AffineSystem;
+use prost::Message;
+
+#[allow(missing_docs, clippy::all)]
+mod onnx {
+    include!(concat!(env!("OUT_DIR"), "/onnx.rs"));
+}
+
+/// ONNX IR version written.
+pub const IR_VERSION: i64 = 8;
+/// Default-domain opset written.
+pub const OPSET: i64 = 17;
+
+const FLOAT: i32 = 1;
+const INT64: i32 = 7;
+const ATTR_INT: i32 = 2;
+
+/// Incrementally builds a graph: named f32/i64 initialisers and nodes with generated output names.
+struct GraphBuilder {
+    nodes: Vec<onnx::NodeProto>,
+    initializers: Vec<onnx::TensorProto>,
+    next_id: usize,
+}
+
+impl GraphBuilder {
+    fn new() -> Self {
+        Self {
+            nodes: Vec::new(),
+            initializers: Vec::new(),
+            next_id: 0,
+        }
+    }
+
+    fn fresh(&mut self, hint: &str) -> String {
+        self.next_id += 1;
+        format!("{hint}_{}", self.next_id)
+    }
+
+    fn constant(&mut self, hint: &str, dims: &[usize], data: &[f64]) -> String {
+        debug_assert_eq!(dims.iter().product::<usize>(), data.len());
+        let name = self.fresh(hint);
+        let raw: Vec<u8> = data
+            .iter()
+            .flat_map(|&x| (x as f32).to_le_bytes())
+            .collect();
+        self.initializers.push(onnx::TensorProto {
+            name: Some(name.clone()),
+            data_type: Some(FLOAT),
+            dims: dims.iter().map(|&d| d as i64).collect(),
+            raw_data: Some(raw),
+            ..Default::default()
+        });
+        name
+    }
+
+    fn constant_i64(&mut self, hint: &str, data: &[i64]) -> String {
+        let name = self.fresh(hint);
+        self.initializers.push(onnx::TensorProto {
+            name: Some(name.clone()),
+            data_type: Some(INT64),
+            dims: vec![data.len() as i64],
+            raw_data: Some(data.iter().flat_map(|x| x.to_le_bytes()).collect()),
+            ..Default::default()
+        });
+        name
+    }
+
+    /// Adds `op(inputs)` with integer attributes and returns its (single) output name, or `output` if given.
+    fn node_named(
+        &mut self,
+        op: &str,
+        inputs: &[&str],
+        ints: &[(&str, i64)],
+        output: Option<&str>,
+    ) -> String {
+        let out = output.map_or_else(|| self.fresh(&op.to_lowercase()), str::to_string);
+        let name = self.fresh(op);
+        self.nodes.push(onnx::NodeProto {
+            op_type: Some(op.into()),
+            name: Some(name),
+            input: inputs.iter().map(|s| s.to_string()).collect(),
+            output: vec![out.clone()],
+            attribute: ints
+                .iter()
+                .map(|(k, v)| onnx::AttributeProto {
+                    name: Some(k.to_string()),
+                    r#type: Some(ATTR_INT),
+                    i: Some(*v),
+                    ..Default::default()
+                })
+                .collect(),
+            ..Default::default()
+        });
+        out
+    }
+
+    fn node(&mut self, op: &str, inputs: &[&str]) -> String {
+        self.node_named(op, inputs, &[], None)
+    }
+
+    /// `x W^T + b` for `W` `[n_out x n_in]` (Gemm with transB).
+    fn dense(&mut self, x: &str, weight: &str, bias: &str) -> String {
+        self.node_named("Gemm", &[x, weight, bias], &[("transB", 1)], None)
+    }
+}
+
+fn tensor_info(name: &str, dims: &[Option<usize>]) -> onnx::ValueInfoProto {
+    let dim = dims
+        .iter()
+        .map(|d| onnx::tensor_shape_proto::Dimension {
+            value: Some(match d {
+                Some(n) => onnx::tensor_shape_proto::dimension::Value::DimValue(*n as i64),
+                None => onnx::tensor_shape_proto::dimension::Value::DimParam("N".into()),
+            }),
+            ..Default::default()
+        })
+        .collect();
+    onnx::ValueInfoProto {
+        name: Some(name.into()),
+        r#type: Some(onnx::TypeProto {
+            value: Some(onnx::type_proto::Value::TensorType(
+                onnx::type_proto::Tensor {
+                    elem_type: Some(FLOAT),
+                    shape: Some(onnx::TensorShapeProto { dim }),
+                },
+            )),
+            ..Default::default()
+        }),
+        ..Default::default()
+    }
+}
+
+/// Writes the ONNX model (serialised `ModelProto`) for `network` evaluated at horizon `tau`, with the
+/// optimal control law of `system`.
+pub fn write_value_graph(network: &ValueNetwork, system: &AffineSystem, tau: f64) -> Vec<u8> {
+    let n_state = system.n_state();
+    let n_params = system.n_params();
+    let n_control = system.n_control();
+    let n_error = system.error_coords.len();
+    let mut b = GraphBuilder::new();
+
+    // Wrap periodic coordinates: s - m*P*floor((s - lo) / P_safe).
+    let lo: Vec<f64> = system.state.iter().map(|d| d.min).collect();
+    let period_safe: Vec<f64> = system
+        .state
+        .iter()
+        .map(|d| if d.periodic { d.max - d.min } else { 1.0 })
+        .collect();
+    let period_masked: Vec<f64> = system
+        .state
+        .iter()
+        .map(|d| if d.periodic { d.max - d.min } else { 0.0 })
+        .collect();
+    let lo_c = b.constant("domain_min", &[n_state], &lo);
+    let ps_c = b.constant("period_safe", &[n_state], &period_safe);
+    let pm_c = b.constant("period_masked", &[n_state], &period_masked);
+    let shifted = b.node("Sub", &["state", &lo_c]);
+    let cycles = b.node("Div", &[&shifted, &ps_c]);
+    let cycles = b.node("Floor", &[&cycles]);
+    let offset = b.node("Mul", &[&cycles, &pm_c]);
+    let state_w = b.node("Sub", &["state", &offset]);
+
+    // First layer with normalisation, omega_0 and the fixed tau folded in.
+    let w0 = network.omega_0;
+    let first = &network.layers[0];
+    let (c, s) = (&network.input.center, &network.input.half_range);
+    let width1 = first.n_out;
+    let col = |o: usize, i: usize| first.weight[o * first.n_in + i];
+    let a_state: Vec<f64> = (0..width1)
+        .flat_map(|o| (0..n_state).map(move |j| w0 * col(o, 1 + j) / s[1 + j]))
+        .collect();
+    let a_params: Vec<f64> = (0..width1)
+        .flat_map(|o| (0..n_params).map(move |k| w0 * col(o, 1 + n_state + k) / s[1 + n_state + k]))
+        .collect();
+    let b_first: Vec<f64> = (0..width1)
+        .map(|o| {
+            let centred: f64 = (1..first.n_in).map(|i| col(o, i) * c[i] / s[i]).sum();
+            w0 * (first.bias[o] + col(o, 0) * (tau - c[0]) / s[0] - centred)
+        })
+        .collect();
+    let a_state_c = b.constant("w1_state", &[width1, n_state], &a_state);
+    let a_params_c = b.constant("w1_params", &[width1, n_params], &a_params);
+    let b_first_c = b.constant("b1", &[width1], &b_first);
+    let from_params = b.node_named(
+        "Gemm",
+        &["params", &a_params_c, &b_first_c],
+        &[("transB", 1)],
+        None,
+    );
+    let from_state = b.node_named("Gemm", &[&state_w, &a_state_c], &[("transB", 1)], None);
+    let mut z = b.node("Add", &[&from_state, &from_params]);
+    let mut pre_activations = vec![z.clone()];
+    let mut h = b.node("Sin", &[&z]);
+
+    // Hidden sine layers.
+    let hidden = &network.layers[1..network.layers.len() - 1];
+    let mut weight_names = Vec::new();
+    for layer in hidden {
+        let w: Vec<f64> = layer.weight.iter().map(|x| w0 * x).collect();
+        let bias: Vec<f64> = layer.bias.iter().map(|x| w0 * x).collect();
+        let w_c = b.constant("w", &[layer.n_out, layer.n_in], &w);
+        let b_c = b.constant("b", &[layer.n_out], &bias);
+        z = b.dense(&h, &w_c, &b_c);
+        pre_activations.push(z.clone());
+        weight_names.push(w_c);
+        h = b.node("Sin", &[&z]);
+    }
+
+    // Linear output layer; tau and the output scale folded in for the exact boundary condition.
+    let last = &network.layers[network.layers.len() - 1];
+    let factor = if network.exact_boundary { tau } else { 1.0 };
+    let w_out: Vec<f64> = last
+        .weight
+        .iter()
+        .map(|x| factor * network.output_scale * x)
+        .collect();
+    let b_out = factor * (network.output_scale * last.bias[0] + network.output_offset);
+    let w_out_c = b.constant("w_out", &[1, last.n_in], &w_out);
+    let b_out_c = b.constant("b_out", &[1], &[b_out]);
+    let mut value_2d = b.dense(&h, &w_out_c, &b_out_c);
+
+    // Explicit backward pass: g = cos(z_k) * g, g = g W_k.
+    let cos_last = b.node("Cos", &[pre_activations.last().unwrap()]);
+    let mut g = b.node("Mul", &[&cos_last, &w_out_c]);
+    for (k, w_c) in weight_names.iter().enumerate().rev() {
+        let back = b.node("MatMul", &[&g, w_c]);
+        let cos = b.node("Cos", &[&pre_activations[k]]);
+        g = b.node("Mul", &[&cos, &back]);
+    }
+    let mut grad = b.node("MatMul", &[&g, &a_state_c]);
+
+    if network.exact_boundary {
+        // V += l(r) = |E^T r|, dV/dr += E (E^T r) / max(l, eps).
+        let select: Vec<f64> = (0..n_state)
+            .flat_map(|i| {
+                (0..n_error).map(move |j| {
+                    if system.error_coords[j] == i {
+                        1.0
+                    } else {
+                        0.0
+                    }
+                })
+            })
+            .collect();
+        let select_t: Vec<f64> = (0..n_error)
+            .flat_map(|j| {
+                (0..n_state).map(move |i| {
+                    if system.error_coords[j] == i {
+                        1.0
+                    } else {
+                        0.0
+                    }
+                })
+            })
+            .collect();
+        let sel_c = b.constant("error_select", &[n_state, n_error], &select);
+        let sel_t_c = b.constant("error_select_t", &[n_error, n_state], &select_t);
+        let axes = b.constant_i64("axes1", &[1]);
+        let eps = b.constant("eps", &[1], &[1e-12]);
+        let e = b.node("MatMul", &[&state_w, &sel_c]);
+        let e2 = b.node("Mul", &[&e, &e]);
+        let sum = b.node_named("ReduceSum", &[&e2, &axes], &[("keepdims", 1)], None);
+        let l = b.node("Sqrt", &[&sum]);
+        value_2d = b.node("Add", &[&value_2d, &l]);
+        let l_safe = b.node("Max", &[&l, &eps]);
+        let unit = b.node("Div", &[&e, &l_safe]);
+        let grad_l = b.node("MatMul", &[&unit, &sel_t_c]);
+        grad = b.node("Add", &[&grad, &grad_l]);
+    }
+    let axes = b.constant_i64("squeeze_axes", &[1]);
+    b.node_named("Squeeze", &[&value_2d, &axes], &[], Some("value"));
+    b.node_named("Identity", &[&grad], &[], Some("grad"));
+
+    // Control law: u_j = lo_j if c_j > 0, hi_j if c_j < 0, midpoint if c_j = 0, with c = grad G_u.
+    let g_u: Vec<f64> = (0..n_state)
+        .flat_map(|i| (0..n_control).map(move |j| system.g_control[(i, j)]))
+        .collect();
+    let g_u_c = b.constant("g_control", &[n_state, n_control], &g_u);
+    let u_lo = b.constant(
+        "u_min",
+        &[n_control],
+        &system.controls.iter().map(|c| c.min).collect::<Vec<_>>(),
+    );
+    let u_hi = b.constant(
+        "u_max",
+        &[n_control],
+        &system.controls.iter().map(|c| c.max).collect::<Vec<_>>(),
+    );
+    let u_mid = b.constant(
+        "u_mid",
+        &[n_control],
+        &system
+            .controls
+            .iter()
+            .map(|c| 0.5 * (c.min + c.max))
+            .collect::<Vec<_>>(),
+    );
+    let zero = b.constant("zero", &[1], &[0.0]);
+    let coeff = b.node("MatMul", &["grad", &g_u_c]);
+    let positive = b.node("Greater", &[&coeff, &zero]);
+    let negative = b.node("Less", &[&coeff, &zero]);
+    let not_positive = b.node("Where", &[&negative, &u_hi, &u_mid]);
+    b.node_named(
+        "Where",
+        &[&positive, &u_lo, &not_positive],
+        &[],
+        Some("control"),
+    );
+
+    let graph = onnx::GraphProto {
+        name: Some(format!("{}_value", system.id)),
+        node: b.nodes,
+        initializer: b.initializers,
+        input: vec![
+            tensor_info("state", &[None, Some(n_state)]),
+            tensor_info("params", &[None, Some(n_params)]),
+        ],
+        output: vec![
+            tensor_info("value", &[None]),
+            tensor_info("grad", &[None, Some(n_state)]),
+            tensor_info("control", &[None, Some(n_control)]),
+        ],
+        ..Default::default()
+    };
+    let model = onnx::ModelProto {
+        ir_version: Some(IR_VERSION),
+        opset_import: vec![onnx::OperatorSetIdProto {
+            domain: Some(String::new()),
+            version: Some(OPSET),
+        }],
+        producer_name: Some("fastrack".into()),
+        producer_version: Some(env!("CARGO_PKG_VERSION").into()),
+        doc_string: Some(format!(
+            "SIREN value function of {} at horizon {tau} s",
+            system.id
+        )),
+        graph: Some(graph),
+        ..Default::default()
+    };
+    model.encode_to_vec()
+}

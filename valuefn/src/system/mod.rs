@@ -1,0 +1,287 @@
+//! Control- and planner-affine relative systems with box-bounded inputs.
+//!
+//! Every system has the shape `r' = f(r) + G_u u + G_p u_p + G_d d` with constant matrices and box sets
+//! (the planner's box is `[-beta_k, beta_k]` per input, from the value function's parameters). The
+//! Hamiltonian, the optimal tracker control, the worst-case planner and disturbance, and the per-dimension
+//! bounds on `|dH/dp_i|` used for Lax-Friedrichs dissipation all follow from that shape; a system only
+//! supplies its drift, matrices, boxes, error coordinates and domain.
+
+mod boxset;
+pub mod double_integrator;
+pub mod drift;
+pub mod dubins4d;
+
+pub use boxset::BoxSet;
+pub use drift::{Drift, DriftTerm, Factor};
+
+use nalgebra::DMatrix;
+
+/// One coordinate of the relative state.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StateDim {
+    /// Name, e.g. `x_r`.
+    pub name: &'static str,
+    /// Physical unit.
+    pub unit: &'static str,
+    /// Domain `[min, max]` (for periodic coordinates: one period).
+    pub min: f64,
+    /// Upper end of the domain.
+    pub max: f64,
+    /// Angle-like coordinate, wrapped into `[min, max)`.
+    pub periodic: bool,
+}
+
+/// One named input with box bounds (tracker control or disturbance).
+#[derive(Debug, Clone, PartialEq)]
+pub struct InputDim {
+    /// Name, e.g. `omega`.
+    pub name: &'static str,
+    /// Physical unit.
+    pub unit: &'static str,
+    /// Lower bound.
+    pub min: f64,
+    /// Upper bound.
+    pub max: f64,
+}
+
+/// One value-function parameter: a planner speed bound `beta_k`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ParamDim {
+    /// Name, e.g. `beta_1`.
+    pub name: &'static str,
+    /// Physical unit.
+    pub unit: &'static str,
+    /// Lower end of the range (`beta_l`).
+    pub min: f64,
+    /// Upper end of the range (`beta_u`).
+    pub max: f64,
+}
+
+/// A relative tracker/planner system of the control- and planner-affine shape.
+#[derive(Debug, Clone)]
+pub struct AffineSystem {
+    /// Identifier, e.g. `dubins4d`.
+    pub id: &'static str,
+    /// One-line description.
+    pub description: &'static str,
+    /// Relative-state coordinates.
+    pub state: Vec<StateDim>,
+    /// Indices of the position-error coordinates (`l(r)` is their Euclidean norm).
+    pub error_coords: Vec<usize>,
+    /// Value-function parameters (planner speed bounds).
+    pub params: Vec<ParamDim>,
+    /// For each planner input, the index of the parameter bounding it: `|u_p,i| <= beta[k(i)]`.
+    pub planner_input_param: Vec<usize>,
+    /// Tracker controls.
+    pub controls: Vec<InputDim>,
+    /// Disturbances (may be empty).
+    pub disturbances: Vec<InputDim>,
+    /// Drift `f(r)`.
+    pub drift: Drift,
+    /// `G_u`, `n_state x n_control`.
+    pub g_control: DMatrix<f64>,
+    /// `G_p`, `n_state x n_planner_inputs`.
+    pub g_planner: DMatrix<f64>,
+    /// `G_d`, `n_state x n_disturbance`.
+    pub g_disturbance: DMatrix<f64>,
+    /// `Q`, `n_state x n_planner_state`: `r = s - Q p`.
+    pub planner_to_state: DMatrix<f64>,
+}
+
+impl AffineSystem {
+    /// Number of relative-state coordinates.
+    pub fn n_state(&self) -> usize {
+        self.state.len()
+    }
+
+    /// Number of parameters.
+    pub fn n_params(&self) -> usize {
+        self.params.len()
+    }
+
+    /// Number of tracker controls.
+    pub fn n_control(&self) -> usize {
+        self.controls.len()
+    }
+
+    /// Number of planner state coordinates (columns of `Q`).
+    pub fn planner_dim(&self) -> usize {
+        self.planner_to_state.ncols()
+    }
+
+    /// The tracker's control box.
+    pub fn control_box(&self) -> BoxSet {
+        BoxSet::new(
+            self.controls.iter().map(|c| c.min).collect(),
+            self.controls.iter().map(|c| c.max).collect(),
+        )
+    }
+
+    /// The planner's box for parameters `params`: `[-beta_k(i), beta_k(i)]` per planner input.
+    pub fn planner_box(&self, params: &[f64]) -> BoxSet {
+        let hi: Vec<f64> = self
+            .planner_input_param
+            .iter()
+            .map(|&k| params[k])
+            .collect();
+        BoxSet::new(hi.iter().map(|b| -b).collect(), hi)
+    }
+
+    /// The disturbance box.
+    pub fn disturbance_box(&self) -> BoxSet {
+        BoxSet::new(
+            self.disturbances.iter().map(|d| d.min).collect(),
+            self.disturbances.iter().map(|d| d.max).collect(),
+        )
+    }
+
+    /// The same system with every planner input bounded by one shared parameter `beta` (diagonal mode).
+    pub fn with_shared_parameter(&self) -> AffineSystem {
+        let first = self.params[0].clone();
+        let (min, max) = self
+            .params
+            .iter()
+            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
+                (lo.min(p.min), hi.max(p.max))
+            });
+        let mut shared = self.clone();
+        shared.params = vec![ParamDim {
+            name: "beta",
+            unit: first.unit,
+            min,
+            max,
+        }];
+        shared.planner_input_param = vec![0; self.planner_input_param.len()];
+        shared
+    }
+
+    /// Tracking error `l(r)`: Euclidean norm of the error coordinates.
+    pub fn tracking_error(&self, r: &[f64]) -> f64 {
+        self.error_coords
+            .iter()
+            .map(|&i| r[i] * r[i])
+            .sum::<f64>()
+            .sqrt()
+    }
+
+    /// Wraps periodic coordinates of `r` into their period `[min, max)`.
+    pub fn wrap(&self, r: &mut [f64]) {
+        for (x, dim) in r.iter_mut().zip(&self.state) {
+            if dim.periodic {
+                let period = dim.max - dim.min;
+                *x -= period * ((*x - dim.min) / period).floor();
+            }
+        }
+    }
+
+    /// True if `r` (after wrapping periodic coordinates) lies within the domain.
+    pub fn in_domain(&self, r: &[f64]) -> bool {
+        r.iter()
+            .zip(&self.state)
+            .all(|(&x, d)| d.periodic || (x >= d.min && x <= d.max))
+    }
+
+    /// Relative state `r = s - Q p`, periodic coordinates wrapped.
+    pub fn relative_state(&self, tracker: &[f64], planner: &[f64]) -> Vec<f64> {
+        let mut r: Vec<f64> = (0..self.n_state())
+            .map(|i| {
+                tracker[i]
+                    - (0..self.planner_dim())
+                        .map(|j| self.planner_to_state[(i, j)] * planner[j])
+                        .sum::<f64>()
+            })
+            .collect();
+        self.wrap(&mut r);
+        r
+    }
+
+    /// `c = M^T p` for a matrix with `n_state` rows.
+    fn project(m: &DMatrix<f64>, p: &[f64]) -> Vec<f64> {
+        (0..m.ncols())
+            .map(|j| (0..m.nrows()).map(|i| m[(i, j)] * p[i]).sum())
+            .collect()
+    }
+
+    /// Relative dynamics `r' = f(r) + G_u u + G_p u_p + G_d d`.
+    pub fn dynamics(&self, r: &[f64], u: &[f64], u_p: &[f64], d: &[f64], out: &mut [f64]) {
+        self.drift.eval(r, out);
+        for (i, o) in out.iter_mut().enumerate() {
+            *o += (0..u.len())
+                .map(|j| self.g_control[(i, j)] * u[j])
+                .sum::<f64>()
+                + (0..u_p.len())
+                    .map(|j| self.g_planner[(i, j)] * u_p[j])
+                    .sum::<f64>()
+                + (0..d.len())
+                    .map(|j| self.g_disturbance[(i, j)] * d[j])
+                    .sum::<f64>();
+        }
+    }
+
+    /// Hamiltonian (horizon form) `H = min_u max_{u_p, d} p . (f + G_u u + G_p u_p + G_d d)`.
+    pub fn hamiltonian(&self, r: &[f64], p: &[f64], params: &[f64]) -> f64 {
+        let mut f = vec![0.0; self.n_state()];
+        self.drift.eval(r, &mut f);
+        let drift: f64 = f.iter().zip(p).map(|(a, b)| a * b).sum();
+        drift
+            + self
+                .control_box()
+                .min_dot(&Self::project(&self.g_control, p))
+            + self
+                .planner_box(params)
+                .max_dot(&Self::project(&self.g_planner, p))
+            + self
+                .disturbance_box()
+                .max_dot(&Self::project(&self.g_disturbance, p))
+    }
+
+    /// Optimal tracker control: minimises `p . G_u u` over the control box.
+    pub fn optimal_control(&self, p: &[f64]) -> Vec<f64> {
+        self.control_box()
+            .argmin_dot(&Self::project(&self.g_control, p))
+    }
+
+    /// Worst-case planner input: maximises `p . G_p u_p` over the planner box.
+    pub fn worst_planner(&self, p: &[f64], params: &[f64]) -> Vec<f64> {
+        self.planner_box(params)
+            .argmax_dot(&Self::project(&self.g_planner, p))
+    }
+
+    /// Worst-case disturbance: maximises `p . G_d d` over the disturbance box.
+    pub fn worst_disturbance(&self, p: &[f64]) -> Vec<f64> {
+        self.disturbance_box()
+            .argmax_dot(&Self::project(&self.g_disturbance, p))
+    }
+
+    /// Per-dimension bounds `alpha_i >= |dH/dp_i|` at `r` (Lax-Friedrichs dissipation coefficients).
+    pub fn dissipation_bounds(&self, r: &[f64], params: &[f64], out: &mut [f64]) {
+        self.drift.eval(r, out);
+        let u_abs = self.control_box().abs_max();
+        let up_abs = self.planner_box(params).abs_max();
+        let d_abs = self.disturbance_box().abs_max();
+        for (i, o) in out.iter_mut().enumerate() {
+            *o = o.abs()
+                + (0..u_abs.len())
+                    .map(|j| self.g_control[(i, j)].abs() * u_abs[j])
+                    .sum::<f64>()
+                + (0..up_abs.len())
+                    .map(|j| self.g_planner[(i, j)].abs() * up_abs[j])
+                    .sum::<f64>()
+                + (0..d_abs.len())
+                    .map(|j| self.g_disturbance[(i, j)].abs() * d_abs[j])
+                    .sum::<f64>();
+        }
+    }
+}
+
+/// Every system the project defines, by id.
+pub fn by_id(id: &str) -> Option<AffineSystem> {
+    match id {
+        dubins4d::ID => Some(dubins4d::system()),
+        double_integrator::ID => Some(double_integrator::system()),
+        _ => None,
+    }
+}
+
+/// Ids accepted by [`by_id`].
+pub const SYSTEM_IDS: &[&str] = &[dubins4d::ID, double_integrator::ID];

@@ -1,0 +1,287 @@
+//! Tracking-error-bound tables from a value function: `V_min(beta)` by dense sampling plus local
+//! refinement, a conservative (monotone) level, the error set's extent and boundary radii.
+
+use crate::manifest::{boundary_directions, TebRow, MIN_TEB_ROWS};
+use crate::network::ValueNetwork;
+use crate::system::AffineSystem;
+use rand::{Rng, SeedableRng};
+
+/// Anything that evaluates `V` and `dV/dr` on a batch (row-major states and params).
+pub trait ValueOracle {
+    /// Returns `(values [N], grads [N x n_state])`.
+    fn values_and_grads(
+        &self,
+        states: &[f64],
+        params: &[f64],
+    ) -> Result<(Vec<f64>, Vec<f64>), String>;
+}
+
+/// A network evaluated at a fixed horizon (f64 reference).
+pub struct AtHorizon<'a> {
+    /// The network.
+    pub network: &'a ValueNetwork,
+    /// The horizon.
+    pub tau: f64,
+}
+
+impl ValueOracle for AtHorizon<'_> {
+    fn values_and_grads(
+        &self,
+        states: &[f64],
+        params: &[f64],
+    ) -> Result<(Vec<f64>, Vec<f64>), String> {
+        let n_state = self.network.n_state();
+        let n_params = params.len() / (states.len() / n_state).max(1);
+        let mut values = Vec::new();
+        let mut grads = Vec::new();
+        for (s, p) in states.chunks(n_state).zip(params.chunks(n_params)) {
+            let vg = self.network.evaluate(self.tau, s, p);
+            values.push(vg.value);
+            grads.extend(vg.grad_state);
+        }
+        Ok((values, grads))
+    }
+}
+
+/// How hard to search.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TebOptions {
+    /// Number of `beta` rows (at least [`MIN_TEB_ROWS`]), evenly spaced over the range.
+    pub rows: usize,
+    /// Uniform samples over the domain per row.
+    pub samples: usize,
+    /// Best samples refined by projected gradient descent.
+    pub refine_starts: usize,
+    /// Descent iterations.
+    pub refine_iters: usize,
+    /// Directions for boundary radii in 2-D error spaces.
+    pub boundary_directions: usize,
+    /// Samples of the non-error coordinates per boundary probe.
+    pub boundary_samples: usize,
+    /// Random seed.
+    pub seed: u64,
+}
+
+impl Default for TebOptions {
+    fn default() -> Self {
+        Self {
+            rows: MIN_TEB_ROWS,
+            samples: 20_000,
+            refine_starts: 32,
+            refine_iters: 60,
+            boundary_directions: 64,
+            boundary_samples: 256,
+            seed: 7,
+        }
+    }
+}
+
+/// A table and where the learned function was not monotone in `beta`.
+#[derive(Debug, Clone, PartialEq)]
+pub struct TebReport {
+    /// The rows.
+    pub rows: Vec<TebRow>,
+    /// `(beta, measured minimum, level raised to)` where a row's minimum fell below an earlier row's.
+    pub non_monotone: Vec<(f64, f64, f64)>,
+}
+
+fn uniform_states(system: &AffineSystem, n: usize, rng: &mut impl Rng) -> Vec<f64> {
+    (0..n)
+        .flat_map(|_| {
+            system
+                .state
+                .iter()
+                .map(|d| rng.random_range(d.min..d.max))
+                .collect::<Vec<_>>()
+        })
+        .collect()
+}
+
+fn project(system: &AffineSystem, r: &mut [f64]) {
+    for (x, d) in r.iter_mut().zip(&system.state) {
+        if !d.periodic {
+            *x = x.clamp(d.min, d.max);
+        }
+    }
+    system.wrap(r);
+}
+
+/// Minimum of `V(., beta)` over the domain: dense uniform sampling, then projected gradient descent with
+/// per-start backtracking from the best samples. Returns `(V_min, argmin)`.
+fn minimise(
+    oracle: &dyn ValueOracle,
+    system: &AffineSystem,
+    params: &[f64],
+    options: &TebOptions,
+    rng: &mut impl Rng,
+) -> Result<(f64, Vec<f64>), String> {
+    let n_state = system.n_state();
+    let states = uniform_states(system, options.samples, rng);
+    let all_params: Vec<f64> = params
+        .iter()
+        .copied()
+        .cycle()
+        .take(options.samples * params.len())
+        .collect();
+    let (values, _) = oracle.values_and_grads(&states, &all_params)?;
+    let mut order: Vec<usize> = (0..values.len()).collect();
+    order.sort_by(|&a, &b| values[a].total_cmp(&values[b]));
+    let k = options.refine_starts.min(order.len());
+    let mut points: Vec<f64> = order[..k]
+        .iter()
+        .flat_map(|&i| states[i * n_state..(i + 1) * n_state].to_vec())
+        .collect();
+    let start_params: Vec<f64> = params
+        .iter()
+        .copied()
+        .cycle()
+        .take(k * params.len())
+        .collect();
+    let (mut current, mut grads) = oracle.values_and_grads(&points, &start_params)?;
+    let scale: f64 = system
+        .state
+        .iter()
+        .map(|d| d.max - d.min)
+        .fold(0.0, f64::max);
+    let mut steps = vec![0.01 * scale; k];
+    for _ in 0..options.refine_iters {
+        let mut trial = points.clone();
+        for j in 0..k {
+            let g = &grads[j * n_state..(j + 1) * n_state];
+            let norm = g.iter().map(|x| x * x).sum::<f64>().sqrt().max(1e-12);
+            let r = &mut trial[j * n_state..(j + 1) * n_state];
+            for (x, gi) in r.iter_mut().zip(g) {
+                *x -= steps[j] * gi / norm;
+            }
+            project(system, r);
+        }
+        let (values, new_grads) = oracle.values_and_grads(&trial, &start_params)?;
+        for j in 0..k {
+            if values[j] < current[j] {
+                current[j] = values[j];
+                points[j * n_state..(j + 1) * n_state]
+                    .copy_from_slice(&trial[j * n_state..(j + 1) * n_state]);
+                grads[j * n_state..(j + 1) * n_state]
+                    .copy_from_slice(&new_grads[j * n_state..(j + 1) * n_state]);
+                steps[j] *= 1.2;
+            } else {
+                steps[j] *= 0.5;
+            }
+        }
+    }
+    let best = (0..k)
+        .min_by(|&a, &b| current[a].total_cmp(&current[b]))
+        .ok_or("no samples")?;
+    Ok((
+        current[best],
+        points[best * n_state..(best + 1) * n_state].to_vec(),
+    ))
+}
+
+/// Extent and boundary radii of `{r : V(r) <= level}` projected onto the error coordinates: per direction,
+/// the largest radius (bisection from the level, which bounds it since `V >= |e|`) at which some sampled
+/// non-error state keeps `V <= level`.
+fn error_set_shape(
+    oracle: &dyn ValueOracle,
+    system: &AffineSystem,
+    params: &[f64],
+    level: f64,
+    options: &TebOptions,
+    rng: &mut impl Rng,
+) -> Result<(Vec<f64>, Vec<f64>), String> {
+    let n_state = system.n_state();
+    let n_error = system.error_coords.len();
+    let directions = boundary_directions(n_error, options.boundary_directions);
+    let axis_directions: Vec<Vec<f64>> = (0..n_error)
+        .flat_map(|i| {
+            [1.0, -1.0].map(|s| {
+                let mut d = vec![0.0; n_error];
+                d[i] = s;
+                d
+            })
+        })
+        .collect();
+    let all: Vec<&Vec<f64>> = directions.iter().chain(axis_directions.iter()).collect();
+    let m = options.boundary_samples;
+    let others = uniform_states(system, m, rng);
+    let batch_params: Vec<f64> = params
+        .iter()
+        .copied()
+        .cycle()
+        .take(m * params.len())
+        .collect();
+    let mut radii = Vec::with_capacity(all.len());
+    for direction in all {
+        let (mut lo, mut hi) = (0.0, level);
+        for _ in 0..12 {
+            let mid = 0.5 * (lo + hi);
+            let mut states = others.clone();
+            for r in states.chunks_mut(n_state) {
+                for (j, &i) in system.error_coords.iter().enumerate() {
+                    r[i] = mid * direction[j];
+                }
+            }
+            let (values, _) = oracle.values_and_grads(&states, &batch_params)?;
+            if values.iter().any(|&v| v <= level) {
+                lo = mid;
+            } else {
+                hi = mid;
+            }
+        }
+        radii.push(lo);
+    }
+    let axis = radii.split_off(directions.len());
+    let extent = (0..n_error)
+        .map(|i| axis[2 * i].max(axis[2 * i + 1]))
+        .collect();
+    Ok((extent, radii))
+}
+
+/// Builds the TEB table of `oracle` for `system` (every parameter set to the row's `beta`).
+pub fn teb_table(
+    oracle: &dyn ValueOracle,
+    system: &AffineSystem,
+    options: &TebOptions,
+) -> Result<TebReport, String> {
+    if options.rows < MIN_TEB_ROWS {
+        return Err(format!(
+            "a TEB table needs at least {MIN_TEB_ROWS} rows, asked for {}",
+            options.rows
+        ));
+    }
+    let (beta_l, beta_u) = system
+        .params
+        .iter()
+        .fold((f64::NEG_INFINITY, f64::INFINITY), |(lo, hi), p| {
+            (lo.max(p.min), hi.min(p.max))
+        });
+    let mut rng = rand::rngs::StdRng::seed_from_u64(options.seed);
+    let mut rows = Vec::with_capacity(options.rows);
+    let mut non_monotone = Vec::new();
+    let mut running_max = f64::NEG_INFINITY;
+    for i in 0..options.rows {
+        let beta = if i + 1 == options.rows {
+            beta_u
+        } else {
+            beta_l + (beta_u - beta_l) * i as f64 / (options.rows - 1) as f64
+        };
+        let params = vec![beta; system.n_params()];
+        let (measured_min, _) = minimise(oracle, system, &params, options, &mut rng)?;
+        if measured_min < running_max {
+            non_monotone.push((beta, measured_min, running_max));
+        }
+        running_max = running_max.max(measured_min);
+        let level = running_max.max(1e-9);
+        let (extent, boundary_radii) =
+            error_set_shape(oracle, system, &params, level, options, &mut rng)?;
+        rows.push(TebRow {
+            beta,
+            level,
+            measured_min,
+            extent,
+            boundary_radii,
+            verification: None,
+        });
+    }
+    Ok(TebReport { rows, non_monotone })
+}
