@@ -2,14 +2,9 @@
 
 /// Generated messages and stubs of package `fastrack.v1`.
 pub mod v1 {
-    #![allow(
-        missing_docs,
-        clippy::doc_lazy_continuation,
-        clippy::large_enum_variant
-    )]
+    #![allow(missing_docs, clippy::doc_lazy_continuation, clippy::large_enum_variant)]
     tonic::include_proto!("fastrack.v1");
 }
 
 /// Encoded `FileDescriptorSet` of the contract, for server reflection.
-pub const FILE_DESCRIPTOR_SET: &[u8] =
-    include_bytes!(concat!(env!("OUT_DIR"), "/fastrack_descriptor.bin"));
+pub const FILE_DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/fastrack_descriptor.bin"));

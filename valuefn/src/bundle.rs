@@ -67,10 +67,7 @@ pub fn sha256_hex(bytes: &[u8]) -> String {
 }
 
 fn read(path: &Path) -> Result<Vec<u8>, BundleError> {
-    std::fs::read(path).map_err(|source| BundleError::Io {
-        path: path.into(),
-        source,
-    })
+    std::fs::read(path).map_err(|source| BundleError::Io { path: path.into(), source })
 }
 
 impl Bundle {
@@ -78,16 +75,10 @@ impl Bundle {
     pub fn load(dir: &Path) -> Result<Self, BundleError> {
         let manifest_path = dir.join(MANIFEST_FILE);
         let text = String::from_utf8_lossy(&read(&manifest_path)?).into_owned();
-        let manifest = Manifest::from_json(&text).map_err(|source| BundleError::Manifest {
-            path: manifest_path,
-            source,
-        })?;
+        let manifest =
+            Manifest::from_json(&text).map_err(|source| BundleError::Manifest { path: manifest_path, source })?;
         let folder_version = dir.file_name().and_then(|s| s.to_str()).unwrap_or_default();
-        let folder_name = dir
-            .parent()
-            .and_then(|p| p.file_name())
-            .and_then(|s| s.to_str())
-            .unwrap_or_default();
+        let folder_name = dir.parent().and_then(|p| p.file_name()).and_then(|s| s.to_str()).unwrap_or_default();
         if folder_name != manifest.name || folder_version != manifest.version.to_string() {
             return Err(BundleError::Location {
                 path: dir.into(),
@@ -99,17 +90,9 @@ impl Bundle {
         let onnx = read(&onnx_path)?;
         let actual = sha256_hex(&onnx);
         if actual != manifest.onnx_sha256 {
-            return Err(BundleError::Checksum {
-                path: onnx_path,
-                expected: manifest.onnx_sha256,
-                actual,
-            });
+            return Err(BundleError::Checksum { path: onnx_path, expected: manifest.onnx_sha256, actual });
         }
-        Ok(Self {
-            dir: dir.into(),
-            manifest,
-            onnx,
-        })
+        Ok(Self { dir: dir.into(), manifest, onnx })
     }
 
     /// Writes `model.onnx` and `manifest.json` (with the graph's checksum filled in) to
@@ -117,25 +100,14 @@ impl Bundle {
     pub fn write(root: &Path, mut manifest: Manifest, onnx: &[u8]) -> Result<PathBuf, BundleError> {
         manifest.onnx_sha256 = sha256_hex(onnx);
         let dir = root.join(&manifest.name).join(manifest.version.to_string());
-        manifest
-            .validate()
-            .map_err(|source| BundleError::Manifest {
-                path: dir.join(MANIFEST_FILE),
-                source,
-            })?;
-        std::fs::create_dir_all(&dir).map_err(|source| BundleError::Io {
-            path: dir.clone(),
-            source,
-        })?;
+        manifest.validate().map_err(|source| BundleError::Manifest { path: dir.join(MANIFEST_FILE), source })?;
+        std::fs::create_dir_all(&dir).map_err(|source| BundleError::Io { path: dir.clone(), source })?;
         let write = |name: &str, bytes: &[u8]| {
             let path = dir.join(name);
             std::fs::write(&path, bytes).map_err(|source| BundleError::Io { path, source })
         };
         write(MODEL_FILE, onnx)?;
-        write(
-            MANIFEST_FILE,
-            format!("{}\n", manifest.to_json()).as_bytes(),
-        )?;
+        write(MANIFEST_FILE, format!("{}\n", manifest.to_json()).as_bytes())?;
         Ok(dir)
     }
 }
@@ -166,15 +138,10 @@ pub fn scan_repository(root: &Path) -> std::io::Result<(Vec<VersionDir>, Vec<(Pa
             let version = version?;
             let label = version.file_name().to_string_lossy().into_owned();
             match label.parse::<u32>() {
-                Ok(v) if v > 0 && version.file_type()?.is_dir() => found.push(VersionDir {
-                    name: name.clone(),
-                    version: v,
-                    path: version.path(),
-                }),
-                _ => skipped.push((
-                    version.path(),
-                    "not a positive-integer version folder".to_string(),
-                )),
+                Ok(v) if v > 0 && version.file_type()?.is_dir() => {
+                    found.push(VersionDir { name: name.clone(), version: v, path: version.path() })
+                }
+                _ => skipped.push((version.path(), "not a positive-integer version folder".to_string())),
             }
         }
     }

@@ -3,6 +3,7 @@
 //! - [`system`]: control- and planner-affine relative systems (`dubins4d`, the double integrator).
 //! - [`network`]: the SIREN value network and its f64 reference evaluation.
 //! - [`manifest`], [`bundle`]: the model bundle format and repository layout.
+//! - [`provenance`]: machine, revision and time stamps for manifests and bench records.
 //! - [`teb`]: TEB tables from a value function (`V_min` per `beta`, extent, boundary).
 //! - `onnx_writer` (feature `writer`): the network plus control law as an ONNX graph.
 //! - `runtime` (feature `runtime`): ONNX Runtime loading and a pooled batch evaluator.
@@ -10,6 +11,7 @@
 pub mod bundle;
 pub mod manifest;
 pub mod network;
+pub mod provenance;
 pub mod system;
 pub mod teb;
 

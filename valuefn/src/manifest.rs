@@ -197,10 +197,7 @@ pub struct ManifestError {
 }
 
 fn fail<T>(field: impl Into<String>, problem: impl Into<String>) -> Result<T, ManifestError> {
-    Err(ManifestError {
-        field: field.into(),
-        problem: problem.into(),
-    })
+    Err(ManifestError { field: field.into(), problem: problem.into() })
 }
 
 fn check_range(field: &str, min: f64, max: f64, strict: bool) -> Result<(), ManifestError> {
@@ -208,13 +205,7 @@ fn check_range(field: &str, min: f64, max: f64, strict: bool) -> Result<(), Mani
         return fail(field, format!("bounds must be finite, got [{min}, {max}]"));
     }
     if min > max || (strict && min == max) {
-        return fail(
-            field,
-            format!(
-                "min must be {} max, got [{min}, {max}]",
-                if strict { "<" } else { "<=" }
-            ),
-        );
+        return fail(field, format!("min must be {} max, got [{min}, {max}]", if strict { "<" } else { "<=" }));
     }
     Ok(())
 }
@@ -257,38 +248,21 @@ impl Manifest {
 
     /// Indices of the error coordinates.
     pub fn error_coords(&self) -> Vec<usize> {
-        (0..self.state.len())
-            .filter(|&i| self.state[i].error_coordinate)
-            .collect()
+        (0..self.state.len()).filter(|&i| self.state[i].error_coordinate).collect()
     }
 
     /// `[beta_l, beta_u]`: the range every parameter shares for table queries (the intersection).
     pub fn beta_range(&self) -> (f64, f64) {
-        self.params
-            .iter()
-            .fold((f64::NEG_INFINITY, f64::INFINITY), |(lo, hi), p| {
-                (lo.max(p.min), hi.min(p.max))
-            })
+        self.params.iter().fold((f64::NEG_INFINITY, f64::INFINITY), |(lo, hi), p| (lo.max(p.min), hi.min(p.max)))
     }
 
     /// Checks every invariant the server relies on.
     pub fn validate(&self) -> Result<(), ManifestError> {
         if self.schema_version != SCHEMA_VERSION {
-            return fail(
-                "schema_version",
-                format!("must be {SCHEMA_VERSION}, got {}", self.schema_version),
-            );
+            return fail("schema_version", format!("must be {SCHEMA_VERSION}, got {}", self.schema_version));
         }
-        if self.name.is_empty()
-            || !self
-                .name
-                .chars()
-                .all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_')
-        {
-            return fail(
-                "name",
-                format!("must be non-empty [A-Za-z0-9_-], got {:?}", self.name),
-            );
+        if self.name.is_empty() || !self.name.chars().all(|c| c.is_ascii_alphanumeric() || c == '-' || c == '_') {
+            return fail("name", format!("must be non-empty [A-Za-z0-9_-], got {:?}", self.name));
         }
         if self.version == 0 {
             return fail("version", "must be a positive integer, got 0");
@@ -297,24 +271,13 @@ impl Manifest {
             return fail("state", "must list at least one coordinate");
         }
         for (i, dim) in self.state.iter().enumerate() {
-            check_range(
-                &format!("state[{i}] ({})", dim.name),
-                dim.min,
-                dim.max,
-                true,
-            )?;
+            check_range(&format!("state[{i}] ({})", dim.name), dim.min, dim.max, true)?;
             if dim.periodic && dim.error_coordinate {
-                return fail(
-                    format!("state[{i}] ({})", dim.name),
-                    "an error coordinate cannot be periodic",
-                );
+                return fail(format!("state[{i}] ({})", dim.name), "an error coordinate cannot be periodic");
             }
         }
         if self.error_coords().is_empty() {
-            return fail(
-                "state",
-                "at least one coordinate must be an error coordinate",
-            );
+            return fail("state", "at least one coordinate must be an error coordinate");
         }
         if self.planner_to_state.len() != self.state.len() {
             return fail(
@@ -332,10 +295,7 @@ impl Manifest {
         }
         for (i, row) in self.planner_to_state.iter().enumerate() {
             if row.len() != planner_dim || row.iter().any(|x| !x.is_finite()) {
-                return fail(
-                    format!("planner_to_state[{i}]"),
-                    format!("must hold {planner_dim} finite numbers"),
-                );
+                return fail(format!("planner_to_state[{i}]"), format!("must hold {planner_dim} finite numbers"));
             }
         }
         if self.params.is_empty() {
@@ -348,9 +308,7 @@ impl Manifest {
         if beta_l >= beta_u {
             return fail(
                 "params",
-                format!(
-                    "parameter ranges must overlap, their intersection is [{beta_l}, {beta_u}]"
-                ),
+                format!("parameter ranges must overlap, their intersection is [{beta_l}, {beta_u}]"),
             );
         }
         if self.controls.is_empty() {
@@ -360,28 +318,16 @@ impl Manifest {
             check_range(&format!("controls[{i}] ({})", c.name), c.min, c.max, false)?;
         }
         if !(self.horizon.is_finite() && self.horizon > 0.0) {
-            return fail(
-                "horizon",
-                format!("must be finite and > 0, got {}", self.horizon),
-            );
+            return fail("horizon", format!("must be finite and > 0, got {}", self.horizon));
         }
         if self.network.omega_0 <= 0.0 || self.network.hidden.iter().any(|&w| w == 0) {
             return fail("network", "omega_0 must be > 0 and hidden widths > 0");
         }
         self.validate_teb_table(beta_l, beta_u)?;
         if self.onnx_sha256.len() != 64
-            || !self
-                .onnx_sha256
-                .chars()
-                .all(|c| c.is_ascii_hexdigit() && !c.is_ascii_uppercase())
+            || !self.onnx_sha256.chars().all(|c| c.is_ascii_hexdigit() && !c.is_ascii_uppercase())
         {
-            return fail(
-                "onnx_sha256",
-                format!(
-                    "must be 64 lowercase hex digits, got {:?}",
-                    self.onnx_sha256
-                ),
-            );
+            return fail("onnx_sha256", format!("must be 64 lowercase hex digits, got {:?}", self.onnx_sha256));
         }
         Ok(())
     }
@@ -389,10 +335,7 @@ impl Manifest {
     fn validate_teb_table(&self, beta_l: f64, beta_u: f64) -> Result<(), ManifestError> {
         let rows = &self.teb_table;
         if rows.len() < MIN_TEB_ROWS {
-            return fail(
-                "teb_table",
-                format!("must have at least {MIN_TEB_ROWS} rows, got {}", rows.len()),
-            );
+            return fail("teb_table", format!("must have at least {MIN_TEB_ROWS} rows, got {}", rows.len()));
         }
         let tol = 1e-9 * (beta_u - beta_l);
         if (rows[0].beta - beta_l).abs() > tol || (rows[rows.len() - 1].beta - beta_u).abs() > tol {
@@ -409,39 +352,18 @@ impl Manifest {
         for (i, row) in rows.iter().enumerate() {
             let field = format!("teb_table[{i}]");
             if i > 0 && row.beta <= rows[i - 1].beta {
-                return fail(
-                    field,
-                    format!(
-                        "beta must increase, {} follows {}",
-                        row.beta,
-                        rows[i - 1].beta
-                    ),
-                );
+                return fail(field, format!("beta must increase, {} follows {}", row.beta, rows[i - 1].beta));
             }
             if !(row.level.is_finite() && row.level > 0.0) {
-                return fail(
-                    field,
-                    format!("level must be finite and > 0, got {}", row.level),
-                );
+                return fail(field, format!("level must be finite and > 0, got {}", row.level));
             }
             if i > 0 && row.served_level() < rows[i - 1].served_level() {
-                return fail(
-                    field,
-                    "levels must not decrease with beta (a conservative table is monotone)",
-                );
+                return fail(field, "levels must not decrease with beta (a conservative table is monotone)");
             }
-            if row.extent.len() != n_error || row.extent.iter().any(|x| !x.is_finite() || *x < 0.0)
-            {
-                return fail(
-                    field,
-                    format!("extent must hold {n_error} finite non-negative numbers"),
-                );
+            if row.extent.len() != n_error || row.extent.iter().any(|x| !x.is_finite() || *x < 0.0) {
+                return fail(field, format!("extent must hold {n_error} finite non-negative numbers"));
             }
-            if row
-                .boundary_radii
-                .iter()
-                .any(|x| !x.is_finite() || *x < 0.0)
-            {
+            if row.boundary_radii.iter().any(|x| !x.is_finite() || *x < 0.0) {
                 return fail(field, "boundary_radii must be finite and non-negative");
             }
             if let Some(v) = &row.verification {
@@ -456,12 +378,7 @@ impl Manifest {
     /// State, parameter and control metadata taken from a system definition.
     pub fn describe_system(
         system: &AffineSystem,
-    ) -> (
-        Vec<StateDimension>,
-        Vec<Vec<f64>>,
-        Vec<RangeDimension>,
-        Vec<RangeDimension>,
-    ) {
+    ) -> (Vec<StateDimension>, Vec<Vec<f64>>, Vec<RangeDimension>, Vec<RangeDimension>) {
         let state = system
             .state
             .iter()
@@ -476,31 +393,17 @@ impl Manifest {
             })
             .collect();
         let q = (0..system.n_state())
-            .map(|i| {
-                (0..system.planner_dim())
-                    .map(|j| system.planner_to_state[(i, j)])
-                    .collect()
-            })
+            .map(|i| (0..system.planner_dim()).map(|j| system.planner_to_state[(i, j)]).collect())
             .collect();
         let params = system
             .params
             .iter()
-            .map(|p| RangeDimension {
-                name: p.name.into(),
-                unit: p.unit.into(),
-                min: p.min,
-                max: p.max,
-            })
+            .map(|p| RangeDimension { name: p.name.into(), unit: p.unit.into(), min: p.min, max: p.max })
             .collect();
         let controls = system
             .controls
             .iter()
-            .map(|c| RangeDimension {
-                name: c.name.into(),
-                unit: c.unit.into(),
-                min: c.min,
-                max: c.max,
-            })
+            .map(|c| RangeDimension { name: c.name.into(), unit: c.unit.into(), min: c.min, max: c.max })
             .collect();
         (state, q, params, controls)
     }

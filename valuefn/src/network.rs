@@ -24,11 +24,7 @@ impl Dense {
         (0..self.n_out)
             .map(|o| {
                 self.bias[o]
-                    + self.weight[o * self.n_in..(o + 1) * self.n_in]
-                        .iter()
-                        .zip(x)
-                        .map(|(w, v)| w * v)
-                        .sum::<f64>()
+                    + self.weight[o * self.n_in..(o + 1) * self.n_in].iter().zip(x).map(|(w, v)| w * v).sum::<f64>()
             })
             .collect()
     }
@@ -111,20 +107,12 @@ impl ValueNetwork {
             .enumerate()
             .map(|(k, w)| {
                 let (n_in, n_out) = (w[0], w[1]);
-                let bound = if k == 0 {
-                    1.0 / n_in as f64
-                } else {
-                    (6.0 / n_in as f64).sqrt() / omega_0
-                };
+                let bound = if k == 0 { 1.0 / n_in as f64 } else { (6.0 / n_in as f64).sqrt() / omega_0 };
                 Dense {
                     n_in,
                     n_out,
-                    weight: (0..n_in * n_out)
-                        .map(|_| rng.random_range(-bound..bound))
-                        .collect(),
-                    bias: (0..n_out)
-                        .map(|_| rng.random_range(-bound..bound))
-                        .collect(),
+                    weight: (0..n_in * n_out).map(|_| rng.random_range(-bound..bound)).collect(),
+                    bias: (0..n_out).map(|_| rng.random_range(-bound..bound)).collect(),
                 }
             })
             .collect();
@@ -135,11 +123,7 @@ impl ValueNetwork {
             output_scale: 1.0,
             output_offset: 0.0,
             exact_boundary,
-            periodic: system
-                .state
-                .iter()
-                .map(|d| d.periodic.then_some((d.min, d.max - d.min)))
-                .collect(),
+            periodic: system.state.iter().map(|d| d.periodic.then_some((d.min, d.max - d.min))).collect(),
             error_coords: system.error_coords.clone(),
         }
     }
@@ -161,10 +145,7 @@ impl ValueNetwork {
 
     /// Hidden layer widths.
     pub fn hidden_widths(&self) -> Vec<usize> {
-        self.layers[..self.layers.len() - 1]
-            .iter()
-            .map(|l| l.n_out)
-            .collect()
+        self.layers[..self.layers.len() - 1].iter().map(|l| l.n_out).collect()
     }
 
     /// Number of state inputs.
@@ -181,12 +162,8 @@ impl ValueNetwork {
             None => x,
         }));
         raw.extend_from_slice(params);
-        let mut h: Vec<f64> = raw
-            .iter()
-            .zip(&self.input.center)
-            .zip(&self.input.half_range)
-            .map(|((x, c), s)| (x - c) / s)
-            .collect();
+        let mut h: Vec<f64> =
+            raw.iter().zip(&self.input.center).zip(&self.input.half_range).map(|((x, c), s)| (x - c) / s).collect();
         let hidden = &self.layers[..self.layers.len() - 1];
         let mut pre_activations = Vec::with_capacity(hidden.len());
         for layer in hidden {
@@ -199,43 +176,22 @@ impl ValueNetwork {
         // Backward pass: d(nn)/d(normalised inputs).
         let mut g: Vec<f64> = last.weight.iter().map(|w| w * self.output_scale).collect();
         for (layer, z) in hidden.iter().zip(&pre_activations).rev() {
-            let gz: Vec<f64> = g
-                .iter()
-                .zip(z)
-                .map(|(g, z)| g * self.omega_0 * z.cos())
-                .collect();
+            let gz: Vec<f64> = g.iter().zip(z).map(|(g, z)| g * self.omega_0 * z.cos()).collect();
             g = layer.back(&gz);
         }
-        let d_raw: Vec<f64> = g
-            .iter()
-            .zip(&self.input.half_range)
-            .map(|(g, s)| g / s)
-            .collect();
+        let d_raw: Vec<f64> = g.iter().zip(&self.input.half_range).map(|(g, s)| g / s).collect();
         let n = state.len();
         if self.exact_boundary {
-            let l = self
-                .error_coords
-                .iter()
-                .map(|&i| state[i] * state[i])
-                .sum::<f64>()
-                .sqrt();
+            let l = self.error_coords.iter().map(|&i| state[i] * state[i]).sum::<f64>().sqrt();
             let mut grad_state: Vec<f64> = d_raw[1..1 + n].iter().map(|g| tau * g).collect();
             if l > 0.0 {
                 for &i in &self.error_coords {
                     grad_state[i] += state[i] / l;
                 }
             }
-            ValueAndGradient {
-                value: l + tau * nn,
-                grad_state,
-                grad_tau: nn + tau * d_raw[0],
-            }
+            ValueAndGradient { value: l + tau * nn, grad_state, grad_tau: nn + tau * d_raw[0] }
         } else {
-            ValueAndGradient {
-                value: nn,
-                grad_state: d_raw[1..1 + n].to_vec(),
-                grad_tau: d_raw[0],
-            }
+            ValueAndGradient { value: nn, grad_state: d_raw[1..1 + n].to_vec(), grad_tau: d_raw[0] }
         }
     }
 }

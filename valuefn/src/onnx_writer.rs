@@ -31,11 +31,7 @@ struct GraphBuilder {
 
 impl GraphBuilder {
     fn new() -> Self {
-        Self {
-            nodes: Vec::new(),
-            initializers: Vec::new(),
-            next_id: 0,
-        }
+        Self { nodes: Vec::new(), initializers: Vec::new(), next_id: 0 }
     }
 
     fn fresh(&mut self, hint: &str) -> String {
@@ -46,10 +42,7 @@ impl GraphBuilder {
     fn constant(&mut self, hint: &str, dims: &[usize], data: &[f64]) -> String {
         debug_assert_eq!(dims.iter().product::<usize>(), data.len());
         let name = self.fresh(hint);
-        let raw: Vec<u8> = data
-            .iter()
-            .flat_map(|&x| (x as f32).to_le_bytes())
-            .collect();
+        let raw: Vec<u8> = data.iter().flat_map(|&x| (x as f32).to_le_bytes()).collect();
         self.initializers.push(onnx::TensorProto {
             name: Some(name.clone()),
             data_type: Some(FLOAT),
@@ -73,13 +66,7 @@ impl GraphBuilder {
     }
 
     /// Adds `op(inputs)` with integer attributes and returns its (single) output name, or `output` if given.
-    fn node_named(
-        &mut self,
-        op: &str,
-        inputs: &[&str],
-        ints: &[(&str, i64)],
-        output: Option<&str>,
-    ) -> String {
+    fn node_named(&mut self, op: &str, inputs: &[&str], ints: &[(&str, i64)], output: Option<&str>) -> String {
         let out = output.map_or_else(|| self.fresh(&op.to_lowercase()), str::to_string);
         let name = self.fresh(op);
         self.nodes.push(onnx::NodeProto {
@@ -125,12 +112,10 @@ fn tensor_info(name: &str, dims: &[Option<usize>]) -> onnx::ValueInfoProto {
     onnx::ValueInfoProto {
         name: Some(name.into()),
         r#type: Some(onnx::TypeProto {
-            value: Some(onnx::type_proto::Value::TensorType(
-                onnx::type_proto::Tensor {
-                    elem_type: Some(FLOAT),
-                    shape: Some(onnx::TensorShapeProto { dim }),
-                },
-            )),
+            value: Some(onnx::type_proto::Value::TensorType(onnx::type_proto::Tensor {
+                elem_type: Some(FLOAT),
+                shape: Some(onnx::TensorShapeProto { dim }),
+            })),
             ..Default::default()
         }),
         ..Default::default()
@@ -148,16 +133,8 @@ pub fn write_value_graph(network: &ValueNetwork, system: &AffineSystem, tau: f64
 
     // Wrap periodic coordinates: s - m*P*floor((s - lo) / P_safe).
     let lo: Vec<f64> = system.state.iter().map(|d| d.min).collect();
-    let period_safe: Vec<f64> = system
-        .state
-        .iter()
-        .map(|d| if d.periodic { d.max - d.min } else { 1.0 })
-        .collect();
-    let period_masked: Vec<f64> = system
-        .state
-        .iter()
-        .map(|d| if d.periodic { d.max - d.min } else { 0.0 })
-        .collect();
+    let period_safe: Vec<f64> = system.state.iter().map(|d| if d.periodic { d.max - d.min } else { 1.0 }).collect();
+    let period_masked: Vec<f64> = system.state.iter().map(|d| if d.periodic { d.max - d.min } else { 0.0 }).collect();
     let lo_c = b.constant("domain_min", &[n_state], &lo);
     let ps_c = b.constant("period_safe", &[n_state], &period_safe);
     let pm_c = b.constant("period_masked", &[n_state], &period_masked);
@@ -173,9 +150,8 @@ pub fn write_value_graph(network: &ValueNetwork, system: &AffineSystem, tau: f64
     let (c, s) = (&network.input.center, &network.input.half_range);
     let width1 = first.n_out;
     let col = |o: usize, i: usize| first.weight[o * first.n_in + i];
-    let a_state: Vec<f64> = (0..width1)
-        .flat_map(|o| (0..n_state).map(move |j| w0 * col(o, 1 + j) / s[1 + j]))
-        .collect();
+    let a_state: Vec<f64> =
+        (0..width1).flat_map(|o| (0..n_state).map(move |j| w0 * col(o, 1 + j) / s[1 + j])).collect();
     let a_params: Vec<f64> = (0..width1)
         .flat_map(|o| (0..n_params).map(move |k| w0 * col(o, 1 + n_state + k) / s[1 + n_state + k]))
         .collect();
@@ -188,12 +164,7 @@ pub fn write_value_graph(network: &ValueNetwork, system: &AffineSystem, tau: f64
     let a_state_c = b.constant("w1_state", &[width1, n_state], &a_state);
     let a_params_c = b.constant("w1_params", &[width1, n_params], &a_params);
     let b_first_c = b.constant("b1", &[width1], &b_first);
-    let from_params = b.node_named(
-        "Gemm",
-        &["params", &a_params_c, &b_first_c],
-        &[("transB", 1)],
-        None,
-    );
+    let from_params = b.node_named("Gemm", &["params", &a_params_c, &b_first_c], &[("transB", 1)], None);
     let from_state = b.node_named("Gemm", &[&state_w, &a_state_c], &[("transB", 1)], None);
     let mut z = b.node("Add", &[&from_state, &from_params]);
     let mut pre_activations = vec![z.clone()];
@@ -216,11 +187,7 @@ pub fn write_value_graph(network: &ValueNetwork, system: &AffineSystem, tau: f64
     // Linear output layer; tau and the output scale folded in for the exact boundary condition.
     let last = &network.layers[network.layers.len() - 1];
     let factor = if network.exact_boundary { tau } else { 1.0 };
-    let w_out: Vec<f64> = last
-        .weight
-        .iter()
-        .map(|x| factor * network.output_scale * x)
-        .collect();
+    let w_out: Vec<f64> = last.weight.iter().map(|x| factor * network.output_scale * x).collect();
     let b_out = factor * (network.output_scale * last.bias[0] + network.output_offset);
     let w_out_c = b.constant("w_out", &[1, last.n_in], &w_out);
     let b_out_c = b.constant("b_out", &[1], &[b_out]);
@@ -239,26 +206,10 @@ pub fn write_value_graph(network: &ValueNetwork, system: &AffineSystem, tau: f64
     if network.exact_boundary {
         // V += l(r) = |E^T r|, dV/dr += E (E^T r) / max(l, eps).
         let select: Vec<f64> = (0..n_state)
-            .flat_map(|i| {
-                (0..n_error).map(move |j| {
-                    if system.error_coords[j] == i {
-                        1.0
-                    } else {
-                        0.0
-                    }
-                })
-            })
+            .flat_map(|i| (0..n_error).map(move |j| if system.error_coords[j] == i { 1.0 } else { 0.0 }))
             .collect();
         let select_t: Vec<f64> = (0..n_error)
-            .flat_map(|j| {
-                (0..n_state).map(move |i| {
-                    if system.error_coords[j] == i {
-                        1.0
-                    } else {
-                        0.0
-                    }
-                })
-            })
+            .flat_map(|j| (0..n_state).map(move |i| if system.error_coords[j] == i { 1.0 } else { 0.0 }))
             .collect();
         let sel_c = b.constant("error_select", &[n_state, n_error], &select);
         let sel_t_c = b.constant("error_select_t", &[n_error, n_state], &select_t);
@@ -279,49 +230,24 @@ pub fn write_value_graph(network: &ValueNetwork, system: &AffineSystem, tau: f64
     b.node_named("Identity", &[&grad], &[], Some("grad"));
 
     // Control law: u_j = lo_j if c_j > 0, hi_j if c_j < 0, midpoint if c_j = 0, with c = grad G_u.
-    let g_u: Vec<f64> = (0..n_state)
-        .flat_map(|i| (0..n_control).map(move |j| system.g_control[(i, j)]))
-        .collect();
+    let g_u: Vec<f64> = (0..n_state).flat_map(|i| (0..n_control).map(move |j| system.g_control[(i, j)])).collect();
     let g_u_c = b.constant("g_control", &[n_state, n_control], &g_u);
-    let u_lo = b.constant(
-        "u_min",
-        &[n_control],
-        &system.controls.iter().map(|c| c.min).collect::<Vec<_>>(),
-    );
-    let u_hi = b.constant(
-        "u_max",
-        &[n_control],
-        &system.controls.iter().map(|c| c.max).collect::<Vec<_>>(),
-    );
-    let u_mid = b.constant(
-        "u_mid",
-        &[n_control],
-        &system
-            .controls
-            .iter()
-            .map(|c| 0.5 * (c.min + c.max))
-            .collect::<Vec<_>>(),
-    );
+    let u_lo = b.constant("u_min", &[n_control], &system.controls.iter().map(|c| c.min).collect::<Vec<_>>());
+    let u_hi = b.constant("u_max", &[n_control], &system.controls.iter().map(|c| c.max).collect::<Vec<_>>());
+    let u_mid =
+        b.constant("u_mid", &[n_control], &system.controls.iter().map(|c| 0.5 * (c.min + c.max)).collect::<Vec<_>>());
     let zero = b.constant("zero", &[1], &[0.0]);
     let coeff = b.node("MatMul", &["grad", &g_u_c]);
     let positive = b.node("Greater", &[&coeff, &zero]);
     let negative = b.node("Less", &[&coeff, &zero]);
     let not_positive = b.node("Where", &[&negative, &u_hi, &u_mid]);
-    b.node_named(
-        "Where",
-        &[&positive, &u_lo, &not_positive],
-        &[],
-        Some("control"),
-    );
+    b.node_named("Where", &[&positive, &u_lo, &not_positive], &[], Some("control"));
 
     let graph = onnx::GraphProto {
         name: Some(format!("{}_value", system.id)),
         node: b.nodes,
         initializer: b.initializers,
-        input: vec![
-            tensor_info("state", &[None, Some(n_state)]),
-            tensor_info("params", &[None, Some(n_params)]),
-        ],
+        input: vec![tensor_info("state", &[None, Some(n_state)]), tensor_info("params", &[None, Some(n_params)])],
         output: vec![
             tensor_info("value", &[None]),
             tensor_info("grad", &[None, Some(n_state)]),
@@ -331,16 +257,10 @@ pub fn write_value_graph(network: &ValueNetwork, system: &AffineSystem, tau: f64
     };
     let model = onnx::ModelProto {
         ir_version: Some(IR_VERSION),
-        opset_import: vec![onnx::OperatorSetIdProto {
-            domain: Some(String::new()),
-            version: Some(OPSET),
-        }],
+        opset_import: vec![onnx::OperatorSetIdProto { domain: Some(String::new()), version: Some(OPSET) }],
         producer_name: Some("fastrack".into()),
         producer_version: Some(env!("CARGO_PKG_VERSION").into()),
-        doc_string: Some(format!(
-            "SIREN value function of {} at horizon {tau} s",
-            system.id
-        )),
+        doc_string: Some(format!("SIREN value function of {} at horizon {tau} s", system.id)),
         graph: Some(graph),
         ..Default::default()
     };

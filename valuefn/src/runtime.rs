@@ -54,17 +54,10 @@ pub struct Runtime {
 static RUNTIME: OnceLock<Result<Runtime, RuntimeError>> = OnceLock::new();
 
 fn find_in(dir: &Path, depth: usize) -> Option<PathBuf> {
-    let mut entries: Vec<_> = std::fs::read_dir(dir)
-        .ok()?
-        .filter_map(Result::ok)
-        .map(|e| e.path())
-        .collect();
+    let mut entries: Vec<_> = std::fs::read_dir(dir).ok()?.filter_map(Result::ok).map(|e| e.path()).collect();
     entries.sort();
     for path in &entries {
-        let name = path
-            .file_name()
-            .and_then(|n| n.to_str())
-            .unwrap_or_default();
+        let name = path.file_name().and_then(|n| n.to_str()).unwrap_or_default();
         if path.is_file() && name.starts_with("libonnxruntime.so.") {
             return Some(path.clone());
         }
@@ -72,10 +65,7 @@ fn find_in(dir: &Path, depth: usize) -> Option<PathBuf> {
     if depth == 0 {
         return None;
     }
-    entries
-        .iter()
-        .filter(|p| p.is_dir())
-        .find_map(|p| find_in(p, depth - 1))
+    entries.iter().filter(|p| p.is_dir()).find_map(|p| find_in(p, depth - 1))
 }
 
 /// Candidate cache folders: `.cache/onnxruntime` in the working directory, the executable's folder and
@@ -89,11 +79,7 @@ fn cache_candidates() -> Vec<PathBuf> {
         roots.extend(exe.ancestors().skip(1).map(Path::to_path_buf));
     }
     roots.dedup();
-    roots
-        .into_iter()
-        .map(|r| r.join(CACHE_DIR))
-        .filter(|p| p.is_dir())
-        .collect()
+    roots.into_iter().map(|r| r.join(CACHE_DIR)).filter(|p| p.is_dir()).collect()
 }
 
 /// Locates the library: `explicit`, then `$FASTRACK_ORT_LIB`, then the project cache.
@@ -119,20 +105,11 @@ pub fn runtime(explicit: Option<&Path>) -> Result<&'static Runtime, RuntimeError
         .get_or_init(|| {
             let library = locate_library(explicit)?;
             if !library.is_file() {
-                return Err(RuntimeError::Library {
-                    path: library,
-                    reason: "no such file".into(),
-                });
+                return Err(RuntimeError::Library { path: library, reason: "no such file".into() });
             }
-            let fail = |reason: String| RuntimeError::Library {
-                path: library.clone(),
-                reason,
-            };
+            let fail = |reason: String| RuntimeError::Library { path: library.clone(), reason };
             let builder = ort::init_from(&library).map_err(|e| fail(e.to_string()))?;
-            let env = builder
-                .with_name("fastrack")
-                .build()
-                .map_err(|e| fail(e.to_string()))?;
+            let env = builder.with_name("fastrack").build().map_err(|e| fail(e.to_string()))?;
             tracing::info!(library = %library.display(), "ONNX Runtime loaded");
             Ok(Runtime { env, library })
         })
@@ -170,13 +147,11 @@ pub struct Evaluator {
     returned: Condvar,
 }
 
-fn check_outlet(
-    kind: &str,
-    outlet: &ort::value::Outlet,
-    expected: &[i64],
-) -> Result<(), RuntimeError> {
+fn check_outlet(kind: &str, outlet: &ort::value::Outlet, expected: &[i64]) -> Result<(), RuntimeError> {
     match outlet.dtype() {
-        ValueType::Tensor { ty: TensorElementType::Float32, shape, .. } if shape.iter().as_slice() == expected => Ok(()),
+        ValueType::Tensor { ty: TensorElementType::Float32, shape, .. } if shape.iter().as_slice() == expected => {
+            Ok(())
+        }
         other => Err(RuntimeError::Signature(format!(
             "{kind} `{}` must be a float32 tensor of shape {expected:?} (-1 = batch), found {other:?}",
             outlet.name()
@@ -186,12 +161,7 @@ fn check_outlet(
 
 impl Evaluator {
     /// Creates `sessions` sessions of `onnx` (at least one) and checks the graph's signature against `dims`.
-    pub fn new(
-        runtime: &Runtime,
-        onnx: &[u8],
-        dims: GraphDims,
-        sessions: usize,
-    ) -> Result<Self, RuntimeError> {
+    pub fn new(runtime: &Runtime, onnx: &[u8], dims: GraphDims, sessions: usize) -> Result<Self, RuntimeError> {
         let mut pool = Vec::with_capacity(sessions.max(1));
         for _ in 0..sessions.max(1) {
             let session = Session::builder(&runtime.env)
@@ -206,12 +176,7 @@ impl Evaluator {
             pool.push(session);
         }
         let session = &pool[0];
-        let names = |outlets: &[ort::value::Outlet]| {
-            outlets
-                .iter()
-                .map(|o| o.name().to_string())
-                .collect::<Vec<_>>()
-        };
+        let names = |outlets: &[ort::value::Outlet]| outlets.iter().map(|o| o.name().to_string()).collect::<Vec<_>>();
         if names(session.inputs()) != ["state", "params"] {
             return Err(RuntimeError::Signature(format!(
                 "inputs must be [state, params], found {:?}",
@@ -224,21 +189,13 @@ impl Evaluator {
                 names(session.outputs())
             )));
         }
-        let (ns, np, nc) = (
-            dims.n_state as i64,
-            dims.n_params as i64,
-            dims.n_control as i64,
-        );
+        let (ns, np, nc) = (dims.n_state as i64, dims.n_params as i64, dims.n_control as i64);
         check_outlet("input", &session.inputs()[0], &[-1, ns])?;
         check_outlet("input", &session.inputs()[1], &[-1, np])?;
         check_outlet("output", &session.outputs()[0], &[-1])?;
         check_outlet("output", &session.outputs()[1], &[-1, ns])?;
         check_outlet("output", &session.outputs()[2], &[-1, nc])?;
-        Ok(Self {
-            dims,
-            idle: Mutex::new(pool),
-            returned: Condvar::new(),
-        })
+        Ok(Self { dims, idle: Mutex::new(pool), returned: Condvar::new() })
     }
 
     /// The graph's dimensions.
@@ -257,18 +214,13 @@ impl Evaluator {
     }
 
     fn checkin(&self, session: Session) {
-        self.idle
-            .lock()
-            .unwrap_or_else(|e| e.into_inner())
-            .push(session);
+        self.idle.lock().unwrap_or_else(|e| e.into_inner()).push(session);
         self.returned.notify_one();
     }
 
     /// Evaluates a batch: `state` `[N x n_state]`, `params` `[N x n_params]`, row-major.
     pub fn evaluate(&self, state: &[f32], params: &[f32]) -> Result<Evaluation, RuntimeError> {
-        let GraphDims {
-            n_state, n_params, ..
-        } = self.dims;
+        let GraphDims { n_state, n_params, .. } = self.dims;
         let n = state.len() / n_state;
         if state.len() != n * n_state || params.len() != n * n_params || n == 0 {
             return Err(RuntimeError::Inference(format!(
@@ -295,33 +247,18 @@ impl Evaluator {
         let params = TensorRef::from_array_view(([n, dims.n_params], params)).map_err(err)?;
         let outputs = session.run(ort::inputs![state, params]).map_err(err)?;
         let extract = |i: usize| -> Result<Vec<f32>, RuntimeError> {
-            Ok(outputs[i]
-                .try_extract_tensor::<f32>()
-                .map_err(err)?
-                .1
-                .to_vec())
+            Ok(outputs[i].try_extract_tensor::<f32>().map_err(err)?.1.to_vec())
         };
-        Ok(Evaluation {
-            value: extract(0)?,
-            grad: extract(1)?,
-            control: extract(2)?,
-        })
+        Ok(Evaluation { value: extract(0)?, grad: extract(1)?, control: extract(2)? })
     }
 }
 
 impl crate::teb::ValueOracle for Evaluator {
-    fn values_and_grads(
-        &self,
-        states: &[f64],
-        params: &[f64],
-    ) -> Result<(Vec<f64>, Vec<f64>), String> {
+    fn values_and_grads(&self, states: &[f64], params: &[f64]) -> Result<(Vec<f64>, Vec<f64>), String> {
         let mut values = Vec::with_capacity(states.len() / self.dims.n_state);
         let mut grads = Vec::with_capacity(states.len());
         const CHUNK: usize = 4096;
-        for (s, p) in states
-            .chunks(CHUNK * self.dims.n_state)
-            .zip(params.chunks(CHUNK * self.dims.n_params))
-        {
+        for (s, p) in states.chunks(CHUNK * self.dims.n_state).zip(params.chunks(CHUNK * self.dims.n_params)) {
             let s: Vec<f32> = s.iter().map(|&x| x as f32).collect();
             let p: Vec<f32> = p.iter().map(|&x| x as f32).collect();
             let out = self.evaluate(&s, &p).map_err(|e| e.to_string())?;

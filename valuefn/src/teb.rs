@@ -9,11 +9,7 @@ use rand::{Rng, SeedableRng};
 /// Anything that evaluates `V` and `dV/dr` on a batch (row-major states and params).
 pub trait ValueOracle {
     /// Returns `(values [N], grads [N x n_state])`.
-    fn values_and_grads(
-        &self,
-        states: &[f64],
-        params: &[f64],
-    ) -> Result<(Vec<f64>, Vec<f64>), String>;
+    fn values_and_grads(&self, states: &[f64], params: &[f64]) -> Result<(Vec<f64>, Vec<f64>), String>;
 }
 
 /// A network evaluated at a fixed horizon (f64 reference).
@@ -25,11 +21,7 @@ pub struct AtHorizon<'a> {
 }
 
 impl ValueOracle for AtHorizon<'_> {
-    fn values_and_grads(
-        &self,
-        states: &[f64],
-        params: &[f64],
-    ) -> Result<(Vec<f64>, Vec<f64>), String> {
+    fn values_and_grads(&self, states: &[f64], params: &[f64]) -> Result<(Vec<f64>, Vec<f64>), String> {
         let n_state = self.network.n_state();
         let n_params = params.len() / (states.len() / n_state).max(1);
         let mut values = Vec::new();
@@ -70,7 +62,7 @@ impl Default for TebOptions {
             refine_starts: 32,
             refine_iters: 60,
             boundary_directions: 64,
-            boundary_samples: 256,
+            boundary_samples: 128,
             seed: 7,
         }
     }
@@ -86,15 +78,7 @@ pub struct TebReport {
 }
 
 fn uniform_states(system: &AffineSystem, n: usize, rng: &mut impl Rng) -> Vec<f64> {
-    (0..n)
-        .flat_map(|_| {
-            system
-                .state
-                .iter()
-                .map(|d| rng.random_range(d.min..d.max))
-                .collect::<Vec<_>>()
-        })
-        .collect()
+    (0..n).flat_map(|_| system.state.iter().map(|d| rng.random_range(d.min..d.max)).collect::<Vec<_>>()).collect()
 }
 
 fn project(system: &AffineSystem, r: &mut [f64]) {
@@ -117,32 +101,16 @@ fn minimise(
 ) -> Result<(f64, Vec<f64>), String> {
     let n_state = system.n_state();
     let states = uniform_states(system, options.samples, rng);
-    let all_params: Vec<f64> = params
-        .iter()
-        .copied()
-        .cycle()
-        .take(options.samples * params.len())
-        .collect();
+    let all_params: Vec<f64> = params.iter().copied().cycle().take(options.samples * params.len()).collect();
     let (values, _) = oracle.values_and_grads(&states, &all_params)?;
     let mut order: Vec<usize> = (0..values.len()).collect();
     order.sort_by(|&a, &b| values[a].total_cmp(&values[b]));
     let k = options.refine_starts.min(order.len());
-    let mut points: Vec<f64> = order[..k]
-        .iter()
-        .flat_map(|&i| states[i * n_state..(i + 1) * n_state].to_vec())
-        .collect();
-    let start_params: Vec<f64> = params
-        .iter()
-        .copied()
-        .cycle()
-        .take(k * params.len())
-        .collect();
+    let mut points: Vec<f64> =
+        order[..k].iter().flat_map(|&i| states[i * n_state..(i + 1) * n_state].to_vec()).collect();
+    let start_params: Vec<f64> = params.iter().copied().cycle().take(k * params.len()).collect();
     let (mut current, mut grads) = oracle.values_and_grads(&points, &start_params)?;
-    let scale: f64 = system
-        .state
-        .iter()
-        .map(|d| d.max - d.min)
-        .fold(0.0, f64::max);
+    let scale: f64 = system.state.iter().map(|d| d.max - d.min).fold(0.0, f64::max);
     let mut steps = vec![0.01 * scale; k];
     for _ in 0..options.refine_iters {
         let mut trial = points.clone();
@@ -159,23 +127,16 @@ fn minimise(
         for j in 0..k {
             if values[j] < current[j] {
                 current[j] = values[j];
-                points[j * n_state..(j + 1) * n_state]
-                    .copy_from_slice(&trial[j * n_state..(j + 1) * n_state]);
-                grads[j * n_state..(j + 1) * n_state]
-                    .copy_from_slice(&new_grads[j * n_state..(j + 1) * n_state]);
+                points[j * n_state..(j + 1) * n_state].copy_from_slice(&trial[j * n_state..(j + 1) * n_state]);
+                grads[j * n_state..(j + 1) * n_state].copy_from_slice(&new_grads[j * n_state..(j + 1) * n_state]);
                 steps[j] *= 1.2;
             } else {
                 steps[j] *= 0.5;
             }
         }
     }
-    let best = (0..k)
-        .min_by(|&a, &b| current[a].total_cmp(&current[b]))
-        .ok_or("no samples")?;
-    Ok((
-        current[best],
-        points[best * n_state..(best + 1) * n_state].to_vec(),
-    ))
+    let best = (0..k).min_by(|&a, &b| current[a].total_cmp(&current[b])).ok_or("no samples")?;
+    Ok((current[best], points[best * n_state..(best + 1) * n_state].to_vec()))
 }
 
 /// Extent and boundary radii of `{r : V(r) <= level}` projected onto the error coordinates: per direction,
@@ -204,16 +165,11 @@ fn error_set_shape(
     let all: Vec<&Vec<f64>> = directions.iter().chain(axis_directions.iter()).collect();
     let m = options.boundary_samples;
     let others = uniform_states(system, m, rng);
-    let batch_params: Vec<f64> = params
-        .iter()
-        .copied()
-        .cycle()
-        .take(m * params.len())
-        .collect();
+    let batch_params: Vec<f64> = params.iter().copied().cycle().take(m * params.len()).collect();
     let mut radii = Vec::with_capacity(all.len());
     for direction in all {
         let (mut lo, mut hi) = (0.0, level);
-        for _ in 0..12 {
+        for _ in 0..10 {
             let mid = 0.5 * (lo + hi);
             let mut states = others.clone();
             for r in states.chunks_mut(n_state) {
@@ -231,30 +187,17 @@ fn error_set_shape(
         radii.push(lo);
     }
     let axis = radii.split_off(directions.len());
-    let extent = (0..n_error)
-        .map(|i| axis[2 * i].max(axis[2 * i + 1]))
-        .collect();
+    let extent = (0..n_error).map(|i| axis[2 * i].max(axis[2 * i + 1])).collect();
     Ok((extent, radii))
 }
 
 /// Builds the TEB table of `oracle` for `system` (every parameter set to the row's `beta`).
-pub fn teb_table(
-    oracle: &dyn ValueOracle,
-    system: &AffineSystem,
-    options: &TebOptions,
-) -> Result<TebReport, String> {
+pub fn teb_table(oracle: &dyn ValueOracle, system: &AffineSystem, options: &TebOptions) -> Result<TebReport, String> {
     if options.rows < MIN_TEB_ROWS {
-        return Err(format!(
-            "a TEB table needs at least {MIN_TEB_ROWS} rows, asked for {}",
-            options.rows
-        ));
+        return Err(format!("a TEB table needs at least {MIN_TEB_ROWS} rows, asked for {}", options.rows));
     }
-    let (beta_l, beta_u) = system
-        .params
-        .iter()
-        .fold((f64::NEG_INFINITY, f64::INFINITY), |(lo, hi), p| {
-            (lo.max(p.min), hi.min(p.max))
-        });
+    let (beta_l, beta_u) =
+        system.params.iter().fold((f64::NEG_INFINITY, f64::INFINITY), |(lo, hi), p| (lo.max(p.min), hi.min(p.max)));
     let mut rng = rand::rngs::StdRng::seed_from_u64(options.seed);
     let mut rows = Vec::with_capacity(options.rows);
     let mut non_monotone = Vec::new();
@@ -267,21 +210,18 @@ pub fn teb_table(
         };
         let params = vec![beta; system.n_params()];
         let (measured_min, _) = minimise(oracle, system, &params, options, &mut rng)?;
+        if !(measured_min > 0.0) {
+            return Err(format!(
+                "V_min = {measured_min} at beta = {beta}: a tracking value function satisfies V >= l(r) >= 0 and has a positive minimum; this one is wrong there"
+            ));
+        }
         if measured_min < running_max {
             non_monotone.push((beta, measured_min, running_max));
         }
         running_max = running_max.max(measured_min);
-        let level = running_max.max(1e-9);
-        let (extent, boundary_radii) =
-            error_set_shape(oracle, system, &params, level, options, &mut rng)?;
-        rows.push(TebRow {
-            beta,
-            level,
-            measured_min,
-            extent,
-            boundary_radii,
-            verification: None,
-        });
+        let level = running_max;
+        let (extent, boundary_radii) = error_set_shape(oracle, system, &params, level, options, &mut rng)?;
+        rows.push(TebRow { beta, level, measured_min, extent, boundary_radii, verification: None });
     }
     Ok(TebReport { rows, non_monotone })
 }

@@ -19,12 +19,7 @@ fn random_batch(system: &AffineSystem, n: usize, seed: u64) -> (Vec<f32>, Vec<f3
             let margin = if d.periodic { 0.01 } else { 0.0 };
             rng.random_range(d.min + margin..d.max - margin) as f32
         }));
-        params.extend(
-            system
-                .params
-                .iter()
-                .map(|p| rng.random_range(p.min..p.max) as f32),
-        );
+        params.extend(system.params.iter().map(|p| rng.random_range(p.min..p.max) as f32));
     }
     (states, params)
 }
@@ -33,46 +28,24 @@ fn check_roundtrip(system: &AffineSystem, exact_boundary: bool, seed: u64) {
     let tau = 1.7;
     let network = ValueNetwork::random(system, &[256, 256, 256], 30.0, 2.0, exact_boundary, seed);
     let onnx = write_value_graph(&network, system, tau);
-    let dims = GraphDims {
-        n_state: system.n_state(),
-        n_params: system.n_params(),
-        n_control: system.n_control(),
-    };
-    let evaluator = Evaluator::new(
-        runtime(None).expect("ONNX Runtime (scripts/setup-onnxruntime.sh)"),
-        &onnx,
-        dims,
-        1,
-    )
-    .unwrap();
+    let dims = GraphDims { n_state: system.n_state(), n_params: system.n_params(), n_control: system.n_control() };
+    let evaluator =
+        Evaluator::new(runtime(None).expect("ONNX Runtime (scripts/setup-onnxruntime.sh)"), &onnx, dims, 1).unwrap();
     let (states, params) = random_batch(system, N, seed + 1);
     let out = evaluator.evaluate(&states, &params).unwrap();
     let (ns, np, nc) = (dims.n_state, dims.n_params, dims.n_control);
-    assert_eq!(
-        (out.value.len(), out.grad.len(), out.control.len()),
-        (N, N * ns, N * nc)
-    );
+    assert_eq!((out.value.len(), out.grad.len(), out.control.len()), (N, N * ns, N * nc));
 
     // value vs the f64 reference, 1e-5 relative (relative to max(|V|, 1): the network's output scale).
     let mut worst_value = 0.0f64;
     for i in 0..N {
-        let s: Vec<f64> = states[i * ns..(i + 1) * ns]
-            .iter()
-            .map(|&x| x.into())
-            .collect();
-        let p: Vec<f64> = params[i * np..(i + 1) * np]
-            .iter()
-            .map(|&x| x.into())
-            .collect();
+        let s: Vec<f64> = states[i * ns..(i + 1) * ns].iter().map(|&x| x.into()).collect();
+        let p: Vec<f64> = params[i * np..(i + 1) * np].iter().map(|&x| x.into()).collect();
         let reference = network.evaluate(tau, &s, &p);
-        let err =
-            (f64::from(out.value[i]) - reference.value).abs() / reference.value.abs().max(1.0);
+        let err = (f64::from(out.value[i]) - reference.value).abs() / reference.value.abs().max(1.0);
         worst_value = worst_value.max(err);
     }
-    assert!(
-        worst_value < 1e-5,
-        "value vs f64 reference: worst relative error {worst_value:e}"
-    );
+    assert!(worst_value < 1e-5, "value vs f64 reference: worst relative error {worst_value:e}");
 
     // grad vs central finite differences of the value. The graph's value equals the f64 network to 1e-5
     // (above), so the differences are taken on the f64 network (h = 1e-5): differencing the f32 output
@@ -80,55 +53,32 @@ fn check_roundtrip(system: &AffineSystem, exact_boundary: bool, seed: u64) {
     let h = 1e-5;
     let mut worst_grad = 0.0f64;
     for i in 0..N {
-        let s: Vec<f64> = states[i * ns..(i + 1) * ns]
-            .iter()
-            .map(|&x| x.into())
-            .collect();
-        let p: Vec<f64> = params[i * np..(i + 1) * np]
-            .iter()
-            .map(|&x| x.into())
-            .collect();
+        let s: Vec<f64> = states[i * ns..(i + 1) * ns].iter().map(|&x| x.into()).collect();
+        let p: Vec<f64> = params[i * np..(i + 1) * np].iter().map(|&x| x.into()).collect();
         // With the exact boundary condition V contains |e|, with a kink at e = 0: skip items within 1e-3.
         if exact_boundary && system.tracking_error(&s) < 1e-3 {
             continue;
         }
         let g = &out.grad[i * ns..(i + 1) * ns];
-        let scale = g
-            .iter()
-            .map(|x| f64::from(*x).abs())
-            .fold(0.0, f64::max)
-            .max(1e-2);
+        let scale = g.iter().map(|x| f64::from(*x).abs()).fold(0.0, f64::max).max(1e-2);
         for j in 0..ns {
             let (mut a, mut b) = (s.clone(), s.clone());
             a[j] += h;
             b[j] -= h;
-            let fd = (network.evaluate(tau, &a, &p).value - network.evaluate(tau, &b, &p).value)
-                / (2.0 * h);
+            let fd = (network.evaluate(tau, &a, &p).value - network.evaluate(tau, &b, &p).value) / (2.0 * h);
             worst_grad = worst_grad.max((fd - f64::from(g[j])).abs() / scale);
         }
     }
-    assert!(
-        worst_grad < 1e-3,
-        "grad vs central differences: worst relative error {worst_grad:e}"
-    );
+    assert!(worst_grad < 1e-3, "grad vs central differences: worst relative error {worst_grad:e}");
 
     // control = the system's control law applied to the graph's grad.
     for i in 0..N {
-        let g: Vec<f64> = out.grad[i * ns..(i + 1) * ns]
-            .iter()
-            .map(|&x| x.into())
-            .collect();
+        let g: Vec<f64> = out.grad[i * ns..(i + 1) * ns].iter().map(|&x| x.into()).collect();
         let expected = system.optimal_control(&g);
-        let got: Vec<f64> = out.control[i * nc..(i + 1) * nc]
-            .iter()
-            .map(|&x| x.into())
-            .collect();
+        let got: Vec<f64> = out.control[i * nc..(i + 1) * nc].iter().map(|&x| x.into()).collect();
         assert_eq!(got, expected, "control of item {i}");
     }
-    eprintln!(
-        "{} exact_bc={exact_boundary}: value err {worst_value:.2e}, grad err {worst_grad:.2e}",
-        system.id
-    );
+    eprintln!("{} exact_bc={exact_boundary}: value err {worst_value:.2e}, grad err {worst_grad:.2e}", system.id);
 }
 
 #[test]
@@ -152,25 +102,9 @@ fn exact_boundary_graph_wraps_periodic_state() {
     let system = dubins4d::system();
     let network = ValueNetwork::random(&system, &[32, 32], 30.0, 2.0, true, 5);
     let onnx = write_value_graph(&network, &system, 1.0);
-    let dims = GraphDims {
-        n_state: 4,
-        n_params: 2,
-        n_control: 2,
-    };
+    let dims = GraphDims { n_state: 4, n_params: 2, n_control: 2 };
     let evaluator = Evaluator::new(runtime(None).unwrap(), &onnx, dims, 1).unwrap();
-    let a = evaluator
-        .evaluate(&[0.5, -0.3, 1.0, 1.2], &[0.8, 0.9])
-        .unwrap();
-    let b = evaluator
-        .evaluate(
-            &[0.5, -0.3, 1.0 + 2.0 * std::f32::consts::PI, 1.2],
-            &[0.8, 0.9],
-        )
-        .unwrap();
-    assert!(
-        (a.value[0] - b.value[0]).abs() < 1e-5,
-        "{} vs {}",
-        a.value[0],
-        b.value[0]
-    );
+    let a = evaluator.evaluate(&[0.5, -0.3, 1.0, 1.2], &[0.8, 0.9]).unwrap();
+    let b = evaluator.evaluate(&[0.5, -0.3, 1.0 + 2.0 * std::f32::consts::PI, 1.2], &[0.8, 0.9]).unwrap();
+    assert!((a.value[0] - b.value[0]).abs() < 1e-5, "{} vs {}", a.value[0], b.value[0]);
 }

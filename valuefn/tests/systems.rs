@@ -4,11 +4,7 @@ use fastrack_valuefn::system::{double_integrator, dubins4d, AffineSystem};
 use rand::{Rng, SeedableRng};
 
 fn random_state(system: &AffineSystem, rng: &mut impl Rng) -> Vec<f64> {
-    system
-        .state
-        .iter()
-        .map(|d| rng.random_range(d.min..d.max))
-        .collect()
+    system.state.iter().map(|d| rng.random_range(d.min..d.max)).collect()
 }
 
 /// `min over control vertices of max over planner vertices of p . r'`.
@@ -23,12 +19,7 @@ fn brute_force_hamiltonian(system: &AffineSystem, r: &[f64], p: &[f64], params: 
         .control_box()
         .vertices()
         .iter()
-        .map(|u| {
-            planners
-                .iter()
-                .map(|up| dot(u, up))
-                .fold(f64::NEG_INFINITY, f64::max)
-        })
+        .map(|u| planners.iter().map(|up| dot(u, up)).fold(f64::NEG_INFINITY, f64::max))
         .fold(f64::INFINITY, f64::min)
 }
 
@@ -43,25 +34,17 @@ fn dubins4d_hamiltonian_and_controls_equal_brute_force_and_closed_form() {
         let h = system.hamiltonian(&r, &p, &params);
         let brute = brute_force_hamiltonian(&system, &r, &p, &params);
         assert!((h - brute).abs() < 1e-12, "H {h} vs brute force {brute}");
-        let closed = p[0] * r[3] * r[2].sin()
-            + p[1] * r[3] * r[2].cos()
-            + params[0] * p[0].abs()
-            + params[1] * p[1].abs()
-            - 5.0 * p[2].abs()
-            - p[3].abs();
-        assert!(
-            (h - closed).abs() < 1e-12,
-            "H {h} vs DESIGN.md closed form {closed}"
-        );
+        let closed =
+            p[0] * r[3] * r[2].sin() + p[1] * r[3] * r[2].cos() + params[0] * p[0].abs() + params[1] * p[1].abs()
+                - 5.0 * p[2].abs()
+                - p[3].abs();
+        assert!((h - closed).abs() < 1e-12, "H {h} vs DESIGN.md closed form {closed}");
 
         // The optimal control attains the min over control vertices; the closed form is -5 sign(p3), -sign(p4).
         let u = system.optimal_control(&p);
         assert_eq!(u, vec![-5.0 * p[2].signum(), -p[3].signum()]);
         let up = system.worst_planner(&p, &params);
-        assert_eq!(
-            up,
-            vec![-params[0] * p[0].signum(), -params[1] * p[1].signum()]
-        );
+        assert_eq!(up, vec![-params[0] * p[0].signum(), -params[1] * p[1].signum()]);
         let mut rdot = vec![0.0; 4];
         system.dynamics(&r, &u, &up, &[], &mut rdot);
         let attained: f64 = rdot.iter().zip(&p).map(|(a, b)| a * b).sum();
@@ -96,13 +79,8 @@ fn dissipation_bounds_dominate_hamiltonian_slopes() {
         for i in 0..4 {
             let mut q = p.clone();
             q[i] += 1e-6;
-            let slope =
-                (system.hamiltonian(&r, &q, &params) - system.hamiltonian(&r, &p, &params)) / 1e-6;
-            assert!(
-                slope.abs() <= alpha[i] + 1e-6,
-                "dim {i}: slope {slope} > alpha {}",
-                alpha[i]
-            );
+            let slope = (system.hamiltonian(&r, &q, &params) - system.hamiltonian(&r, &p, &params)) / 1e-6;
+            assert!(slope.abs() <= alpha[i] + 1e-6, "dim {i}: slope {slope} > alpha {}", alpha[i]);
         }
     }
 }
@@ -112,11 +90,7 @@ fn relative_state_subtracts_planner_and_wraps_angles() {
     let system = dubins4d::system();
     let r = system.relative_state(&[1.0, 2.0, 3.0 * std::f64::consts::PI, 1.5], &[0.25, 0.5]);
     assert!((r[0] - 0.75).abs() < 1e-12 && (r[1] - 1.5).abs() < 1e-12);
-    assert!(
-        (r[2] - (-std::f64::consts::PI)).abs() < 1e-9,
-        "3 pi wraps to -pi, got {}",
-        r[2]
-    );
+    assert!((r[2] - (-std::f64::consts::PI)).abs() < 1e-9, "3 pi wraps to -pi, got {}", r[2]);
     assert_eq!(r[3], 1.5);
     assert!((system.tracking_error(&r) - (0.75f64.hypot(1.5))).abs() < 1e-12);
     assert!(system.in_domain(&r));

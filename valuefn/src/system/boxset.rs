@@ -26,16 +26,12 @@ impl BoxSet {
 
     /// `min_{x in box} c . x`.
     pub fn min_dot(&self, c: &[f64]) -> f64 {
-        (0..c.len())
-            .map(|i| (c[i] * self.lo[i]).min(c[i] * self.hi[i]))
-            .sum()
+        (0..c.len()).map(|i| (c[i] * self.lo[i]).min(c[i] * self.hi[i])).sum()
     }
 
     /// `max_{x in box} c . x`.
     pub fn max_dot(&self, c: &[f64]) -> f64 {
-        (0..c.len())
-            .map(|i| (c[i] * self.lo[i]).max(c[i] * self.hi[i]))
-            .sum()
+        (0..c.len()).map(|i| (c[i] * self.lo[i]).max(c[i] * self.hi[i])).sum()
     }
 
     /// A minimiser of `c . x`: `lo` where `c > 0`, `hi` where `c < 0`, the midpoint where `c = 0`.
@@ -61,28 +57,14 @@ impl BoxSet {
 
     /// `max_{x in box} |x_i|` per coordinate.
     pub fn abs_max(&self) -> Vec<f64> {
-        self.lo
-            .iter()
-            .zip(&self.hi)
-            .map(|(l, h)| l.abs().max(h.abs()))
-            .collect()
+        self.lo.iter().zip(&self.hi).map(|(l, h)| l.abs().max(h.abs())).collect()
     }
 
     /// Every vertex of the box (`2^n` points), for brute-force checks.
     pub fn vertices(&self) -> Vec<Vec<f64>> {
         let n = self.lo.len();
         (0..1usize << n)
-            .map(|mask| {
-                (0..n)
-                    .map(|i| {
-                        if mask >> i & 1 == 1 {
-                            self.hi[i]
-                        } else {
-                            self.lo[i]
-                        }
-                    })
-                    .collect()
-            })
+            .map(|mask| (0..n).map(|i| if mask >> i & 1 == 1 { self.hi[i] } else { self.lo[i] }).collect())
             .collect()
     }
 }

@@ -22,10 +22,7 @@ pub fn closed_form_teb(beta: f64) -> f64 {
 
 /// The double-integrator relative system.
 pub fn system() -> AffineSystem {
-    let drift = Drift {
-        n_state: 2,
-        terms: vec![term(0, 1.0, &[Factor::Linear(1)])],
-    };
+    let drift = Drift { n_state: 2, terms: vec![term(0, 1.0, &[Factor::Linear(1)])] };
     AffineSystem {
         id: ID,
         description: "1-D double integrator (x_r, v), |u| <= 0.5, tracking a point planner with |u_p| <= beta",

@@ -51,17 +51,12 @@ impl Drift {
     pub fn eval(&self, r: &[f64], out: &mut [f64]) {
         out.iter_mut().for_each(|o| *o = 0.0);
         for term in &self.terms {
-            out[term.output] +=
-                term.coefficient * term.factors.iter().map(|f| f.eval(r)).product::<f64>();
+            out[term.output] += term.coefficient * term.factors.iter().map(|f| f.eval(r)).product::<f64>();
         }
     }
 }
 
 /// Shorthand for a term.
 pub(crate) fn term(output: usize, coefficient: f64, factors: &[Factor]) -> DriftTerm {
-    DriftTerm {
-        output,
-        coefficient,
-        factors: factors.to_vec(),
-    }
+    DriftTerm { output, coefficient, factors: factors.to_vec() }
 }

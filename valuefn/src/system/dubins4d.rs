@@ -22,34 +22,10 @@ pub const V_MAX: f64 = 3.0;
 /// The dubins4d relative system.
 pub fn system() -> AffineSystem {
     let state = vec![
-        StateDim {
-            name: "x_r",
-            unit: "m",
-            min: -POSITION_HALF_WIDTH,
-            max: POSITION_HALF_WIDTH,
-            periodic: false,
-        },
-        StateDim {
-            name: "y_r",
-            unit: "m",
-            min: -POSITION_HALF_WIDTH,
-            max: POSITION_HALF_WIDTH,
-            periodic: false,
-        },
-        StateDim {
-            name: "theta",
-            unit: "rad",
-            min: -PI,
-            max: PI,
-            periodic: true,
-        },
-        StateDim {
-            name: "v",
-            unit: "m/s",
-            min: V_MIN,
-            max: V_MAX,
-            periodic: false,
-        },
+        StateDim { name: "x_r", unit: "m", min: -POSITION_HALF_WIDTH, max: POSITION_HALF_WIDTH, periodic: false },
+        StateDim { name: "y_r", unit: "m", min: -POSITION_HALF_WIDTH, max: POSITION_HALF_WIDTH, periodic: false },
+        StateDim { name: "theta", unit: "rad", min: -PI, max: PI, periodic: true },
+        StateDim { name: "v", unit: "m/s", min: V_MIN, max: V_MAX, periodic: false },
     ];
     let drift = Drift {
         n_state: 4,

@@ -111,19 +111,12 @@ impl AffineSystem {
 
     /// The tracker's control box.
     pub fn control_box(&self) -> BoxSet {
-        BoxSet::new(
-            self.controls.iter().map(|c| c.min).collect(),
-            self.controls.iter().map(|c| c.max).collect(),
-        )
+        BoxSet::new(self.controls.iter().map(|c| c.min).collect(), self.controls.iter().map(|c| c.max).collect())
     }
 
     /// The planner's box for parameters `params`: `[-beta_k(i), beta_k(i)]` per planner input.
     pub fn planner_box(&self, params: &[f64]) -> BoxSet {
-        let hi: Vec<f64> = self
-            .planner_input_param
-            .iter()
-            .map(|&k| params[k])
-            .collect();
+        let hi: Vec<f64> = self.planner_input_param.iter().map(|&k| params[k]).collect();
         BoxSet::new(hi.iter().map(|b| -b).collect(), hi)
     }
 
@@ -138,30 +131,17 @@ impl AffineSystem {
     /// The same system with every planner input bounded by one shared parameter `beta` (diagonal mode).
     pub fn with_shared_parameter(&self) -> AffineSystem {
         let first = self.params[0].clone();
-        let (min, max) = self
-            .params
-            .iter()
-            .fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| {
-                (lo.min(p.min), hi.max(p.max))
-            });
+        let (min, max) =
+            self.params.iter().fold((f64::INFINITY, f64::NEG_INFINITY), |(lo, hi), p| (lo.min(p.min), hi.max(p.max)));
         let mut shared = self.clone();
-        shared.params = vec![ParamDim {
-            name: "beta",
-            unit: first.unit,
-            min,
-            max,
-        }];
+        shared.params = vec![ParamDim { name: "beta", unit: first.unit, min, max }];
         shared.planner_input_param = vec![0; self.planner_input_param.len()];
         shared
     }
 
     /// Tracking error `l(r)`: Euclidean norm of the error coordinates.
     pub fn tracking_error(&self, r: &[f64]) -> f64 {
-        self.error_coords
-            .iter()
-            .map(|&i| r[i] * r[i])
-            .sum::<f64>()
-            .sqrt()
+        self.error_coords.iter().map(|&i| r[i] * r[i]).sum::<f64>().sqrt()
     }
 
     /// Wraps periodic coordinates of `r` into their period `[min, max)`.
@@ -176,19 +156,14 @@ impl AffineSystem {
 
     /// True if `r` (after wrapping periodic coordinates) lies within the domain.
     pub fn in_domain(&self, r: &[f64]) -> bool {
-        r.iter()
-            .zip(&self.state)
-            .all(|(&x, d)| d.periodic || (x >= d.min && x <= d.max))
+        r.iter().zip(&self.state).all(|(&x, d)| d.periodic || (x >= d.min && x <= d.max))
     }
 
     /// Relative state `r = s - Q p`, periodic coordinates wrapped.
     pub fn relative_state(&self, tracker: &[f64], planner: &[f64]) -> Vec<f64> {
         let mut r: Vec<f64> = (0..self.n_state())
             .map(|i| {
-                tracker[i]
-                    - (0..self.planner_dim())
-                        .map(|j| self.planner_to_state[(i, j)] * planner[j])
-                        .sum::<f64>()
+                tracker[i] - (0..self.planner_dim()).map(|j| self.planner_to_state[(i, j)] * planner[j]).sum::<f64>()
             })
             .collect();
         self.wrap(&mut r);
@@ -197,24 +172,16 @@ impl AffineSystem {
 
     /// `c = M^T p` for a matrix with `n_state` rows.
     fn project(m: &DMatrix<f64>, p: &[f64]) -> Vec<f64> {
-        (0..m.ncols())
-            .map(|j| (0..m.nrows()).map(|i| m[(i, j)] * p[i]).sum())
-            .collect()
+        (0..m.ncols()).map(|j| (0..m.nrows()).map(|i| m[(i, j)] * p[i]).sum()).collect()
     }
 
     /// Relative dynamics `r' = f(r) + G_u u + G_p u_p + G_d d`.
     pub fn dynamics(&self, r: &[f64], u: &[f64], u_p: &[f64], d: &[f64], out: &mut [f64]) {
         self.drift.eval(r, out);
         for (i, o) in out.iter_mut().enumerate() {
-            *o += (0..u.len())
-                .map(|j| self.g_control[(i, j)] * u[j])
-                .sum::<f64>()
-                + (0..u_p.len())
-                    .map(|j| self.g_planner[(i, j)] * u_p[j])
-                    .sum::<f64>()
-                + (0..d.len())
-                    .map(|j| self.g_disturbance[(i, j)] * d[j])
-                    .sum::<f64>();
+            *o += (0..u.len()).map(|j| self.g_control[(i, j)] * u[j]).sum::<f64>()
+                + (0..u_p.len()).map(|j| self.g_planner[(i, j)] * u_p[j]).sum::<f64>()
+                + (0..d.len()).map(|j| self.g_disturbance[(i, j)] * d[j]).sum::<f64>();
         }
     }
 
@@ -224,33 +191,24 @@ impl AffineSystem {
         self.drift.eval(r, &mut f);
         let drift: f64 = f.iter().zip(p).map(|(a, b)| a * b).sum();
         drift
-            + self
-                .control_box()
-                .min_dot(&Self::project(&self.g_control, p))
-            + self
-                .planner_box(params)
-                .max_dot(&Self::project(&self.g_planner, p))
-            + self
-                .disturbance_box()
-                .max_dot(&Self::project(&self.g_disturbance, p))
+            + self.control_box().min_dot(&Self::project(&self.g_control, p))
+            + self.planner_box(params).max_dot(&Self::project(&self.g_planner, p))
+            + self.disturbance_box().max_dot(&Self::project(&self.g_disturbance, p))
     }
 
     /// Optimal tracker control: minimises `p . G_u u` over the control box.
     pub fn optimal_control(&self, p: &[f64]) -> Vec<f64> {
-        self.control_box()
-            .argmin_dot(&Self::project(&self.g_control, p))
+        self.control_box().argmin_dot(&Self::project(&self.g_control, p))
     }
 
     /// Worst-case planner input: maximises `p . G_p u_p` over the planner box.
     pub fn worst_planner(&self, p: &[f64], params: &[f64]) -> Vec<f64> {
-        self.planner_box(params)
-            .argmax_dot(&Self::project(&self.g_planner, p))
+        self.planner_box(params).argmax_dot(&Self::project(&self.g_planner, p))
     }
 
     /// Worst-case disturbance: maximises `p . G_d d` over the disturbance box.
     pub fn worst_disturbance(&self, p: &[f64]) -> Vec<f64> {
-        self.disturbance_box()
-            .argmax_dot(&Self::project(&self.g_disturbance, p))
+        self.disturbance_box().argmax_dot(&Self::project(&self.g_disturbance, p))
     }
 
     /// Per-dimension bounds `alpha_i >= |dH/dp_i|` at `r` (Lax-Friedrichs dissipation coefficients).
@@ -261,15 +219,9 @@ impl AffineSystem {
         let d_abs = self.disturbance_box().abs_max();
         for (i, o) in out.iter_mut().enumerate() {
             *o = o.abs()
-                + (0..u_abs.len())
-                    .map(|j| self.g_control[(i, j)].abs() * u_abs[j])
-                    .sum::<f64>()
-                + (0..up_abs.len())
-                    .map(|j| self.g_planner[(i, j)].abs() * up_abs[j])
-                    .sum::<f64>()
-                + (0..d_abs.len())
-                    .map(|j| self.g_disturbance[(i, j)].abs() * d_abs[j])
-                    .sum::<f64>();
+                + (0..u_abs.len()).map(|j| self.g_control[(i, j)].abs() * u_abs[j]).sum::<f64>()
+                + (0..up_abs.len()).map(|j| self.g_planner[(i, j)].abs() * up_abs[j]).sum::<f64>()
+                + (0..d_abs.len()).map(|j| self.g_disturbance[(i, j)].abs() * d_abs[j]).sum::<f64>();
         }
     }
 }

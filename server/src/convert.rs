@@ -1,0 +1,62 @@
+//! Manifest to wire types.
+
+use fastrack_proto::v1 as pb;
+use fastrack_valuefn::manifest::Manifest;
+
+/// The `ModelInfo` describing a manifest (`is_default_version` is filled in by the repository).
+pub fn model_info(m: &Manifest) -> pb::ModelInfo {
+    let interval = |min: f64, max: f64| Some(pb::Interval { min, max });
+    pb::ModelInfo {
+        name: m.name.clone(),
+        version: m.version,
+        system: m.system.id.clone(),
+        description: m.system.description.clone(),
+        state: m
+            .state
+            .iter()
+            .map(|d| pb::StateDimension {
+                name: d.name.clone(),
+                unit: d.unit.clone(),
+                bounds: interval(d.min, d.max),
+                periodic: d.periodic,
+                error_coordinate: d.error_coordinate,
+            })
+            .collect(),
+        params: m
+            .params
+            .iter()
+            .map(|p| pb::ParameterDimension {
+                name: p.name.clone(),
+                unit: p.unit.clone(),
+                range: interval(p.min, p.max),
+            })
+            .collect(),
+        controls: m
+            .controls
+            .iter()
+            .map(|c| pb::ControlDimension {
+                name: c.name.clone(),
+                unit: c.unit.clone(),
+                bounds: interval(c.min, c.max),
+            })
+            .collect(),
+        planner_to_state: m.planner_to_state.iter().flatten().copied().collect(),
+        planner_dim: m.planner_dim() as u32,
+        horizon: m.horizon,
+        teb_table: m
+            .teb_table
+            .iter()
+            .map(|row| pb::TebRow {
+                beta: row.beta,
+                level: row.served_level(),
+                learned_level: row.level,
+                verified_level: row.verification.as_ref().map(|v| v.verified_level),
+                extent: row.extent.clone(),
+            })
+            .collect(),
+        untrained: m.untrained,
+        onnx_sha256: m.onnx_sha256.clone(),
+        manifest_json: m.to_json(),
+        is_default_version: false,
+    }
+}

@@ -1,0 +1,6 @@
+//! gRPC service implementations.
+
+pub mod admin;
+pub mod models;
+pub mod safety;
+pub mod track;

@@ -1,0 +1,150 @@
+//! `SafetyService`: planner speed, tracking error bounds, value and tracking control (unary), plus the
+//! `Track` stream (see [`super::track`]).
+
+use crate::repository::Repository;
+use crate::teb::query_planner_control;
+use crate::validate::{self, MAX_BOUNDARY_POINTS};
+use fastrack_proto::v1 as pb;
+use fastrack_valuefn::manifest::{boundary_directions, TebRow};
+use pb::safety_service_server::SafetyService;
+use std::pin::Pin;
+use std::sync::Arc;
+use std::time::Duration;
+use tokio_stream::Stream;
+use tonic::{Request, Response, Status, Streaming};
+
+/// Answers safety queries from the repository's models.
+pub struct Safety {
+    /// The repository.
+    pub repository: Arc<Repository>,
+    /// Default idle timeout of `Track` streams.
+    pub stream_idle_timeout: Duration,
+}
+
+/// `count` points on the boundary of a 2-D error set, radii interpolated linearly in angle between the
+/// stored directions, counter-clockwise from angle 0.
+fn boundary_points(row: &TebRow, n_error: usize, count: usize) -> Result<Vec<f64>, Status> {
+    let radii = &row.boundary_radii;
+    if radii.is_empty() {
+        return Err(Status::failed_precondition(
+            "this model's TEB table holds no boundary data (error sets of more than 2 dimensions)",
+        ));
+    }
+    Ok(match n_error {
+        1 => vec![radii[0], -radii[1]],
+        _ => {
+            let m = radii.len();
+            (0..count)
+                .flat_map(|k| {
+                    let angle = 2.0 * std::f64::consts::PI * k as f64 / count as f64;
+                    let position = angle / (2.0 * std::f64::consts::PI) * m as f64;
+                    let (i, frac) = (position.floor() as usize % m, position.fract());
+                    let r = radii[i] * (1.0 - frac) + radii[(i + 1) % m] * frac;
+                    [r * angle.cos(), r * angle.sin()]
+                })
+                .collect()
+        }
+    })
+}
+
+#[tonic::async_trait]
+impl SafetyService for Safety {
+    async fn query_planner_control(
+        &self,
+        request: Request<pb::QueryPlannerControlRequest>,
+    ) -> Result<Response<pb::QueryPlannerControlResponse>, Status> {
+        let req = request.into_inner();
+        let model = self.repository.resolve(req.model.as_ref())?;
+        let d_obs = validate::d_obs(req.d_obs)?;
+        let q = query_planner_control(&model.manifest.teb_table, d_obs);
+        Ok(Response::new(pb::QueryPlannerControlResponse {
+            beta_query: q.beta,
+            dteb_radius: q.dteb_radius,
+            steb_radius: q.steb_radius,
+            steb_exceeds_half_distance: q.steb_exceeds_half_distance,
+            model_version: model.manifest.version,
+        }))
+    }
+
+    async fn get_tracking_error_bound(
+        &self,
+        request: Request<pb::GetTrackingErrorBoundRequest>,
+    ) -> Result<Response<pb::GetTrackingErrorBoundResponse>, Status> {
+        let req = request.into_inner();
+        let model = self.repository.resolve(req.model.as_ref())?;
+        let beta = validate::beta(&model, req.beta)?;
+        if req.boundary_points > MAX_BOUNDARY_POINTS {
+            return Err(Status::invalid_argument(format!(
+                "boundary_points = {}; must be at most {MAX_BOUNDARY_POINTS}",
+                req.boundary_points
+            )));
+        }
+        let row = model.row_for(beta).ok_or_else(|| Status::internal("validated beta has no table row"))?;
+        let n_error = model.manifest.error_coords().len();
+        let boundary = if req.boundary_points == 0 {
+            Vec::new()
+        } else if boundary_directions(n_error, 1).is_empty() {
+            return Err(Status::invalid_argument(format!(
+                "boundary points exist for 1-D and 2-D error spaces; this model's has {n_error} dimensions (ask for boundary_points = 0)"
+            )));
+        } else {
+            boundary_points(row, n_error, req.boundary_points as usize)?
+        };
+        Ok(Response::new(pb::GetTrackingErrorBoundResponse {
+            level: row.served_level(),
+            radius: row.served_level(),
+            extent: row.extent.clone(),
+            table_beta: row.beta,
+            boundary,
+            model_version: model.manifest.version,
+        }))
+    }
+
+    async fn evaluate_value(
+        &self,
+        request: Request<pb::EvaluateValueRequest>,
+    ) -> Result<Response<pb::EvaluateValueResponse>, Status> {
+        let req = request.into_inner();
+        let model = self.repository.resolve(req.model.as_ref())?;
+        let batch = validate::batch(&model, &req.states, &req.params, req.out_of_domain())?;
+        let (result, batch) = model.evaluate(batch).await?;
+        let widen = |v: &[f32]| v.iter().map(|&x| f64::from(x)).collect();
+        Ok(Response::new(pb::EvaluateValueResponse {
+            values: widen(&result.outputs.value),
+            gradients: widen(&result.outputs.grad),
+            controls: widen(&result.outputs.control),
+            in_teb: result.in_teb,
+            in_domain: batch.in_domain,
+            model_version: model.manifest.version,
+        }))
+    }
+
+    async fn tracking_control(
+        &self,
+        request: Request<pb::TrackingControlRequest>,
+    ) -> Result<Response<pb::TrackingControlResponse>, Status> {
+        let req = request.into_inner();
+        let model = self.repository.resolve(req.model.as_ref())?;
+        let batch = validate::batch(&model, &req.states, &req.params, req.out_of_domain())?;
+        let (result, batch) = model.evaluate(batch).await?;
+        let widen = |v: &[f32]| v.iter().map(|&x| f64::from(x)).collect();
+        Ok(Response::new(pb::TrackingControlResponse {
+            controls: widen(&result.outputs.control),
+            values: widen(&result.outputs.value),
+            in_teb: result.in_teb,
+            in_domain: batch.in_domain,
+            model_version: model.manifest.version,
+        }))
+    }
+
+    type TrackStream = Pin<Box<dyn Stream<Item = Result<pb::TrackResponse, Status>> + Send + 'static>>;
+
+    async fn track(
+        &self,
+        request: Request<Streaming<pb::TrackRequest>>,
+    ) -> Result<Response<Self::TrackStream>, Status> {
+        let stream =
+            super::track::open(Arc::clone(&self.repository), request.into_inner(), self.stream_idle_timeout).await?;
+        Ok(Response::new(Box::pin(stream)))
+    }
+}

@@ -1,0 +1,110 @@
+//! Writes a value network as a served bundle: ONNX graph, TEB table computed from the graph itself
+//! through ONNX Runtime, manifest with provenance; then reloads it and checks the served value against
+//! the network before declaring success.
+
+use anyhow::{ensure, Context};
+use fastrack_valuefn::bundle::Bundle;
+use fastrack_valuefn::manifest::{Manifest, NetworkInfo, Provenance, SystemInfo, SCHEMA_VERSION};
+use fastrack_valuefn::network::ValueNetwork;
+use fastrack_valuefn::onnx_writer::write_value_graph;
+use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
+use fastrack_valuefn::system::AffineSystem;
+use fastrack_valuefn::teb::{teb_table, TebOptions};
+use rand::{Rng, SeedableRng};
+use std::path::{Path, PathBuf};
+
+/// What to export.
+pub struct ExportRequest<'a> {
+    /// The network.
+    pub network: &'a ValueNetwork,
+    /// Its system.
+    pub system: &'a AffineSystem,
+    /// Horizon fixed in the graph (s).
+    pub horizon: f64,
+    /// Model name.
+    pub name: &'a str,
+    /// Model version.
+    pub version: u32,
+    /// Untrained (random) weights.
+    pub untrained: bool,
+    /// Training provenance (machine, revision and time are filled in here).
+    pub provenance: Provenance,
+    /// TEB search effort.
+    pub teb: TebOptions,
+}
+
+/// Largest relative difference between served and network values accepted on reload.
+const RELOAD_TOLERANCE: f64 = 1e-4;
+
+/// Writes `<root>/<name>/<version>/` and returns the folder.
+pub fn export(root: &Path, request: ExportRequest<'_>) -> anyhow::Result<PathBuf> {
+    let ExportRequest { network, system, horizon, .. } = request;
+    let onnx = write_value_graph(network, system, horizon);
+    let dims = GraphDims { n_state: system.n_state(), n_params: system.n_params(), n_control: system.n_control() };
+    let rt = runtime(None)?;
+    let evaluator = Evaluator::new(rt, &onnx, dims, 1).context("loading the written graph")?;
+    let report = teb_table(&evaluator, system, &request.teb).map_err(anyhow::Error::msg)?;
+    for (beta, measured, raised) in &report.non_monotone {
+        tracing::warn!(beta, measured, raised_to = raised, "learned V_min not monotone in beta; level raised");
+    }
+    let (state, planner_to_state, params, controls) = Manifest::describe_system(system);
+    let mut provenance = request.provenance;
+    provenance.machine = fastrack_valuefn::provenance::machine_description();
+    provenance.source_revision = fastrack_valuefn::provenance::source_revision();
+    provenance.created = fastrack_valuefn::provenance::utc_now_rfc3339();
+    let manifest = Manifest {
+        schema_version: SCHEMA_VERSION,
+        name: request.name.into(),
+        version: request.version,
+        system: SystemInfo { id: system.id.into(), description: system.description.into() },
+        state,
+        planner_to_state,
+        params,
+        controls,
+        horizon,
+        network: NetworkInfo {
+            kind: "siren".into(),
+            hidden: network.hidden_widths(),
+            omega_0: network.omega_0,
+            exact_boundary: network.exact_boundary,
+        },
+        teb_table: report.rows,
+        untrained: request.untrained,
+        provenance,
+        onnx_sha256: String::new(),
+    };
+    let dir = Bundle::write(root, manifest, &onnx)?;
+    check_reload(&dir, network, system, horizon, dims)?;
+    Ok(dir)
+}
+
+/// Reloads the bundle through the loader and ONNX Runtime and compares served values with the network.
+fn check_reload(
+    dir: &Path,
+    network: &ValueNetwork,
+    system: &AffineSystem,
+    horizon: f64,
+    dims: GraphDims,
+) -> anyhow::Result<()> {
+    let bundle = Bundle::load(dir)?;
+    let evaluator = Evaluator::new(runtime(None)?, &bundle.onnx, dims, 1)?;
+    let mut rng = rand::rngs::StdRng::seed_from_u64(99);
+    let n = 256;
+    let states: Vec<f64> =
+        (0..n).flat_map(|_| system.state.iter().map(|d| rng.random_range(d.min..d.max)).collect::<Vec<_>>()).collect();
+    let params: Vec<f64> =
+        (0..n).flat_map(|_| system.params.iter().map(|p| rng.random_range(p.min..p.max)).collect::<Vec<_>>()).collect();
+    let to_f32 = |v: &[f64]| v.iter().map(|&x| x as f32).collect::<Vec<_>>();
+    let served = evaluator.evaluate(&to_f32(&states), &to_f32(&params))?;
+    let worst = (0..n)
+        .map(|i| {
+            let s = &states[i * dims.n_state..(i + 1) * dims.n_state];
+            let p = &params[i * dims.n_params..(i + 1) * dims.n_params];
+            let reference = network.evaluate(horizon, s, p).value;
+            (f64::from(served.value[i]) - reference).abs() / reference.abs().max(1.0)
+        })
+        .fold(0.0, f64::max);
+    ensure!(worst < RELOAD_TOLERANCE, "served value differs from the network by {worst:e} (relative) after reload");
+    tracing::info!(bundle = %dir.display(), worst_relative_error = worst, "bundle reloaded and checked");
+    Ok(())
+}
