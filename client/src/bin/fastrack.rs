@@ -1,0 +1,421 @@
+//! `fastrack`: command-line client of the fastrack safety service, one subcommand per RPC, human-readable
+//! or `--json` output.
+
+use anyhow::Context;
+use clap::{Parser, Subcommand};
+use fastrack_client::{model_ref, pb, ClientOptions, FastrackClient};
+use serde_json::{json, Value};
+use std::time::Duration;
+
+#[derive(Parser)]
+#[command(name = "fastrack", version, about = "Client of the fastrack safety service")]
+struct Cli {
+    /// Server address.
+    #[arg(long, env = "FASTRACK_SERVER", default_value = "http://127.0.0.1:50051", global = true)]
+    server: String,
+    /// Per-call deadline in milliseconds.
+    #[arg(long, default_value_t = 5000, global = true)]
+    timeout_ms: u64,
+    /// Print JSON instead of text.
+    #[arg(long, global = true)]
+    json: bool,
+    #[command(subcommand)]
+    command: Command,
+}
+
+#[derive(Subcommand)]
+enum Command {
+    /// Server health (grpc.health.v1).
+    Health,
+    /// Lists loaded models.
+    Models,
+    /// Describes a model: domain, parameters, controls, TEB table.
+    Model {
+        /// Model name.
+        name: String,
+        /// Version (0 = latest).
+        #[arg(long, default_value_t = 0)]
+        version: u32,
+    },
+    /// queryPlannerControl: the fastest planner speed bound for an obstacle distance.
+    Query {
+        /// Model name.
+        name: String,
+        /// Distance to the nearest sensed obstacle (omit when none is sensed).
+        #[arg(long)]
+        d_obs: Option<f64>,
+        /// Version (0 = latest).
+        #[arg(long, default_value_t = 0)]
+        version: u32,
+    },
+    /// The tracking error bound at a planner speed bound.
+    Teb {
+        /// Model name.
+        name: String,
+        /// Planner speed bound.
+        #[arg(long)]
+        beta: f64,
+        /// Boundary points of the error set to print.
+        #[arg(long, default_value_t = 0)]
+        boundary: u32,
+        /// Version (0 = latest).
+        #[arg(long, default_value_t = 0)]
+        version: u32,
+    },
+    /// V, dV/dr and u* for one or more states.
+    Evaluate(BatchArgs),
+    /// Optimal tracking control for one or more states.
+    Control(BatchArgs),
+    /// Runs a short scripted robot on a Track stream: the planner drives straight past an obstacle, the
+    /// tracker follows with the served control (the model's own dynamics, Euler steps).
+    Track {
+        /// Model name.
+        name: String,
+        /// Number of ticks.
+        #[arg(long, default_value_t = 40)]
+        ticks: u32,
+        /// Control period (s).
+        #[arg(long, default_value_t = 0.1)]
+        dt: f64,
+    },
+    /// Admin: loads a model from the server's repository.
+    Load {
+        /// Model name.
+        name: String,
+        /// Version (0 = every version on disk).
+        #[arg(long, default_value_t = 0)]
+        version: u32,
+    },
+    /// Admin: stops serving a model.
+    Unload {
+        /// Model name.
+        name: String,
+        /// Version (0 = every version).
+        #[arg(long, default_value_t = 0)]
+        version: u32,
+    },
+    /// Admin: re-reads a model (or, without a name, the whole repository) from disk.
+    Reload {
+        /// Model name.
+        name: Option<String>,
+    },
+}
+
+#[derive(clap::Args)]
+struct BatchArgs {
+    /// Model name.
+    name: String,
+    /// A relative state, comma separated; repeat for a batch.
+    #[arg(long = "state", value_delimiter = ',', num_args = 1, action = clap::ArgAction::Append, required = true)]
+    states: Vec<f64>,
+    /// Parameters of every item, comma separated (default: every parameter = --beta).
+    #[arg(long, value_delimiter = ',')]
+    params: Option<Vec<f64>>,
+    /// Shorthand: every parameter of every item equal to this beta.
+    #[arg(long)]
+    beta: Option<f64>,
+    /// Evaluate states outside the trained domain, flagged, instead of rejecting them.
+    #[arg(long)]
+    allow_out_of_domain: bool,
+    /// Version (0 = latest).
+    #[arg(long, default_value_t = 0)]
+    version: u32,
+}
+
+fn print(json_mode: bool, value: Value, text: impl FnOnce() -> String) {
+    if json_mode {
+        println!("{}", serde_json::to_string_pretty(&value).expect("JSON serialises"));
+    } else {
+        println!("{}", text());
+    }
+}
+
+fn model_json(m: &pb::ModelInfo) -> Value {
+    json!({
+        "name": m.name, "version": m.version, "system": m.system, "description": m.description,
+        "untrained": m.untrained, "default_version": m.is_default_version, "horizon": m.horizon,
+        "state": m.state.iter().map(|d| json!({"name": d.name, "unit": d.unit,
+            "min": d.bounds.map(|b| b.min), "max": d.bounds.map(|b| b.max), "periodic": d.periodic,
+            "error_coordinate": d.error_coordinate})).collect::<Vec<_>>(),
+        "params": m.params.iter().map(|p| json!({"name": p.name, "unit": p.unit,
+            "min": p.range.map(|r| r.min), "max": p.range.map(|r| r.max)})).collect::<Vec<_>>(),
+        "controls": m.controls.iter().map(|c| json!({"name": c.name, "unit": c.unit,
+            "min": c.bounds.map(|b| b.min), "max": c.bounds.map(|b| b.max)})).collect::<Vec<_>>(),
+        "teb_table": m.teb_table.iter().map(|r| json!({"beta": r.beta, "level": r.level,
+            "learned_level": r.learned_level, "verified_level": r.verified_level, "extent": r.extent})).collect::<Vec<_>>(),
+        "onnx_sha256": m.onnx_sha256,
+    })
+}
+
+fn model_text(m: &pb::ModelInfo) -> String {
+    let mut out = format!(
+        "{}/{}{} — system {}{}\n  {}\n  horizon {} s\n  state:",
+        m.name,
+        m.version,
+        if m.is_default_version { " (default)" } else { "" },
+        m.system,
+        if m.untrained { " — UNTRAINED (random weights, bounds meaningless)" } else { "" },
+        m.description,
+        m.horizon
+    );
+    for d in &m.state {
+        let b = d.bounds.unwrap_or_default();
+        out += &format!(
+            "\n    {:<8} [{}, {}] {}{}",
+            d.name,
+            b.min,
+            b.max,
+            d.unit,
+            if d.periodic { " periodic" } else { "" }
+        );
+    }
+    out += "\n  params:";
+    for p in &m.params {
+        let r = p.range.unwrap_or_default();
+        out += &format!("\n    {:<8} [{}, {}] {}", p.name, r.min, r.max, p.unit);
+    }
+    out += "\n  TEB table:\n    beta      level    learned  verified";
+    for r in &m.teb_table {
+        let verified = r.verified_level.map_or("-".to_string(), |v| format!("{v:.4}"));
+        out += &format!("\n    {:<8.4}  {:<7.4}  {:<7.4}  {verified}", r.beta, r.level, r.learned_level);
+    }
+    out
+}
+
+async fn batch(client: &FastrackClient, args: BatchArgs, control_only: bool, json_mode: bool) -> anyhow::Result<()> {
+    let info = client.get_model(model_ref(&args.name, args.version)).await?;
+    let (ns, np, nc) = (info.state.len(), info.params.len(), info.controls.len());
+    anyhow::ensure!(args.states.len() % ns == 0, "each --state needs {ns} numbers");
+    let n = args.states.len() / ns;
+    let params = match (args.params, args.beta) {
+        (Some(p), _) => p.iter().copied().cycle().take(n * p.len().max(1)).collect::<Vec<_>>(),
+        (None, Some(beta)) => vec![beta; n * np],
+        (None, None) => anyhow::bail!("give --params or --beta"),
+    };
+    let policy = if args.allow_out_of_domain { pb::OutOfDomainPolicy::Flag } else { pb::OutOfDomainPolicy::Reject };
+    let model = model_ref(&args.name, args.version);
+    if control_only {
+        let r = client.tracking_control(model, args.states.clone(), params, policy).await?;
+        print(
+            json_mode,
+            json!({"controls": r.controls, "values": r.values, "in_teb": r.in_teb, "in_domain": r.in_domain, "model_version": r.model_version}),
+            || {
+                (0..n)
+                    .map(|i| {
+                        format!(
+                            "state {:?}: u* = {:?}  V = {:.4}  in_teb = {}  in_domain = {}",
+                            &args.states[i * ns..(i + 1) * ns],
+                            &r.controls[i * nc..(i + 1) * nc],
+                            r.values[i],
+                            r.in_teb[i],
+                            r.in_domain[i]
+                        )
+                    })
+                    .collect::<Vec<_>>()
+                    .join("\n")
+            },
+        );
+    } else {
+        let r = client.evaluate_value(model, args.states.clone(), params, policy).await?;
+        print(
+            json_mode,
+            json!({"values": r.values, "gradients": r.gradients, "controls": r.controls, "in_teb": r.in_teb, "in_domain": r.in_domain, "model_version": r.model_version}),
+            || {
+                (0..n)
+                    .map(|i| {
+                        format!(
+                            "state {:?}: V = {:.4}  dV/dr = {:?}  u* = {:?}  in_teb = {}  in_domain = {}",
+                            &args.states[i * ns..(i + 1) * ns],
+                            r.values[i],
+                            &r.gradients[i * ns..(i + 1) * ns],
+                            &r.controls[i * nc..(i + 1) * nc],
+                            r.in_teb[i],
+                            r.in_domain[i]
+                        )
+                    })
+                    .collect::<Vec<_>>()
+                    .join("\n")
+            },
+        );
+    }
+    Ok(())
+}
+
+/// The scripted robot of `fastrack track`: planner from the origin along +y at `beta_query` per axis, an
+/// obstacle disc at (1.2, 2.5) of radius 0.3, the tracker stepped with the model system's dynamics.
+async fn scripted_track(
+    client: &FastrackClient,
+    name: &str,
+    ticks: u32,
+    dt: f64,
+    json_mode: bool,
+) -> anyhow::Result<()> {
+    let info = client.get_model(model_ref(name, 0)).await?;
+    let system = fastrack_valuefn::system::by_id(&info.system)
+        .with_context(|| format!("no dynamics known for system {:?}", info.system))?;
+    anyhow::ensure!(
+        system.planner_dim() == 2 && system.n_state() == 4,
+        "the scripted robot drives 2-D planners with 4-D trackers (dubins4d)"
+    );
+    let (obstacle, obstacle_radius): ([f64; 2], f64) = ([1.2, 2.5], 0.3);
+    let mut tracker: Vec<f64> = vec![0.0, 0.0, 0.0, 1.0];
+    let mut planner = vec![0.0, 0.0];
+    let mut session = client.track(model_ref(name, 0), 10.0).await?;
+    let mut rows = Vec::new();
+    if !json_mode {
+        println!("  t      beta   dTEB    |e|     V       in_teb  in_domain  omega   alpha");
+    }
+    for seq in 0..u64::from(ticks) {
+        let d_obs = ((tracker[0] - obstacle[0]).hypot(tracker[1] - obstacle[1]) - obstacle_radius).max(0.0);
+        let reply = session
+            .tick(pb::TrackTick {
+                seq,
+                tracker_state: tracker.clone(),
+                planner_state: planner.clone(),
+                d_obs: Some(d_obs),
+            })
+            .await?;
+        if let Some(error) = &reply.error {
+            anyhow::bail!("tick {seq} rejected ({}): {}", error.code, error.message);
+        }
+        let error = reply.relative_state[0].hypot(reply.relative_state[1]);
+        let t = seq as f64 * dt;
+        if json_mode {
+            rows.push(json!({"t": t, "beta_query": reply.beta_query, "dteb_radius": reply.dteb_radius, "error": error,
+                "value": reply.value, "in_teb": reply.in_teb, "in_domain": reply.in_domain, "control": reply.control}));
+        } else {
+            println!(
+                "  {t:<5.2}  {:<5.3}  {:<6.3}  {error:<6.3}  {:<6.3}  {:<6}  {:<9}  {:<6.2}  {:.2}",
+                reply.beta_query,
+                reply.dteb_radius,
+                reply.value,
+                reply.in_teb,
+                reply.in_domain,
+                reply.control[0],
+                reply.control[1]
+            );
+        }
+        let mut rate = vec![0.0; 4];
+        system.dynamics(&tracker, &reply.control, &[0.0, 0.0], &[], &mut rate);
+        // The tracker's own motion is the relative dynamics with a resting planner.
+        for (s, r) in tracker.iter_mut().zip(&rate) {
+            *s += dt * r;
+        }
+        planner[1] += dt * reply.beta_query;
+    }
+    if json_mode {
+        println!("{}", serde_json::to_string_pretty(&rows)?);
+    }
+    Ok(())
+}
+
+#[tokio::main(flavor = "current_thread")]
+async fn main() -> anyhow::Result<()> {
+    let cli = Cli::parse();
+    let timeout = Duration::from_millis(cli.timeout_ms);
+    let client =
+        FastrackClient::connect(&cli.server, ClientOptions { connect_timeout: timeout, request_timeout: timeout })
+            .await?;
+    let j = cli.json;
+    match cli.command {
+        Command::Health => {
+            let status = client.health().await?;
+            print(j, json!({"status": status.as_str_name()}), || status.as_str_name().to_string());
+        }
+        Command::Models => {
+            let models = client.list_models().await?;
+            print(j, Value::Array(models.iter().map(model_json).collect()), || {
+                models
+                    .iter()
+                    .map(|m| {
+                        format!(
+                            "{}/{}{}  {}{}",
+                            m.name,
+                            m.version,
+                            if m.is_default_version { "*" } else { " " },
+                            m.system,
+                            if m.untrained { "  UNTRAINED" } else { "" }
+                        )
+                    })
+                    .collect::<Vec<_>>()
+                    .join("\n")
+            });
+        }
+        Command::Model { name, version } => {
+            let m = client.get_model(model_ref(&name, version)).await?;
+            print(j, model_json(&m), || model_text(&m));
+        }
+        Command::Query { name, d_obs, version } => {
+            let r = client.query_planner_control(model_ref(&name, version), d_obs).await?;
+            print(
+                j,
+                json!({"beta_query": r.beta_query, "dteb_radius": r.dteb_radius, "steb_radius": r.steb_radius,
+                       "steb_exceeds_half_distance": r.steb_exceeds_half_distance, "model_version": r.model_version}),
+                || {
+                    format!(
+                        "beta_query = {:.4}  dTEB radius = {:.4}  sTEB radius = {:.4}{}",
+                        r.beta_query,
+                        r.dteb_radius,
+                        r.steb_radius,
+                        if r.steb_exceeds_half_distance { "  (sTEB exceeds d_obs/2: slowest speed)" } else { "" }
+                    )
+                },
+            );
+        }
+        Command::Teb { name, beta, boundary, version } => {
+            let r = client.tracking_error_bound(model_ref(&name, version), beta, boundary).await?;
+            print(
+                j,
+                json!({"level": r.level, "radius": r.radius, "extent": r.extent, "table_beta": r.table_beta, "boundary": r.boundary, "model_version": r.model_version}),
+                || {
+                    let mut s = format!(
+                        "level = {:.4}  radius = {:.4}  extent = {:?}  (table beta {:.4})",
+                        r.level, r.radius, r.extent, r.table_beta
+                    );
+                    for p in r.boundary.chunks(r.extent.len().max(1)) {
+                        s += &format!("\n  {p:?}");
+                    }
+                    s
+                },
+            );
+        }
+        Command::Evaluate(args) => batch(&client, args, false, j).await?,
+        Command::Control(args) => batch(&client, args, true, j).await?,
+        Command::Track { name, ticks, dt } => scripted_track(&client, &name, ticks, dt, j).await?,
+        Command::Load { name, version } => {
+            let v = client.load_model(&name, version).await?;
+            print(j, json!({"loaded_versions": v}), || format!("{name}: loaded versions {v:?}"));
+        }
+        Command::Unload { name, version } => {
+            let v = client.unload_model(&name, version).await?;
+            print(j, json!({"unloaded_versions": v}), || format!("{name}: unloaded versions {v:?}"));
+        }
+        Command::Reload { name } => {
+            let outcomes = client.reload_model(name.as_deref().unwrap_or_default()).await?;
+            print(
+                j,
+                Value::Array(
+                    outcomes
+                        .iter()
+                        .map(|o| json!({"name": o.name, "version": o.version, "loaded": o.loaded, "error": o.error}))
+                        .collect(),
+                ),
+                || {
+                    outcomes
+                        .iter()
+                        .map(|o| {
+                            format!(
+                                "{}/{}: {}",
+                                o.name,
+                                o.version,
+                                if o.loaded { "loaded".to_string() } else { format!("rejected: {}", o.error) }
+                            )
+                        })
+                        .collect::<Vec<_>>()
+                        .join("\n")
+                },
+            );
+        }
+    }
+    Ok(())
+}

@@ -1,0 +1,194 @@
+//! Harness for end-to-end tests: writes model bundles into a temporary repository, starts the real
+//! `fastrack-server` binary on a free loopback port, connects the client library, and stops the server
+//! (checking that it never panicked) at the end.
+
+use fastrack_client::{ClientOptions, FastrackClient};
+use fastrack_valuefn::bundle::Bundle;
+use fastrack_valuefn::manifest::{Manifest, NetworkInfo, Provenance, SystemInfo, TebRow, SCHEMA_VERSION};
+use fastrack_valuefn::network::ValueNetwork;
+use fastrack_valuefn::onnx_writer::write_value_graph;
+use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
+use fastrack_valuefn::system::AffineSystem;
+use std::path::{Path, PathBuf};
+use std::process::{Child, Command, Stdio};
+use std::time::Duration;
+
+/// Horizon fixed in test bundles.
+pub const TEST_HORIZON: f64 = 1.0;
+
+/// The hand-made TEB table of test bundles: 16 rows over the system's beta range, level `0.2 + 0.1 k`.
+pub fn hand_made_table(system: &AffineSystem) -> Vec<TebRow> {
+    let (lo, hi) = (system.params[0].min, system.params[0].max);
+    (0..16)
+        .map(|k| {
+            let level = 0.2 + 0.1 * k as f64;
+            TebRow {
+                beta: if k == 15 { hi } else { lo + (hi - lo) * k as f64 / 15.0 },
+                level,
+                measured_min: level,
+                extent: vec![0.5 * level; system.error_coords.len()],
+                boundary_radii: vec![0.8 * level; if system.error_coords.len() == 2 { 16 } else { 2 }],
+                verification: None,
+            }
+        })
+        .collect()
+}
+
+/// A test bundle's network (small, seeded).
+pub fn test_network(system: &AffineSystem, seed: u64) -> ValueNetwork {
+    let mut network = ValueNetwork::random(system, &[32, 32], 30.0, TEST_HORIZON, true, seed);
+    network.output_offset = 0.5;
+    network
+}
+
+/// Writes `<root>/<name>/<version>/` from a seeded network with the hand-made table; returns the folder.
+pub fn write_test_bundle(root: &Path, system: &AffineSystem, name: &str, version: u32, seed: u64) -> PathBuf {
+    let network = test_network(system, seed);
+    let onnx = write_value_graph(&network, system, TEST_HORIZON);
+    let (state, planner_to_state, params, controls) = Manifest::describe_system(system);
+    let manifest = Manifest {
+        schema_version: SCHEMA_VERSION,
+        name: name.into(),
+        version,
+        system: SystemInfo { id: system.id.into(), description: system.description.into() },
+        state,
+        planner_to_state,
+        params,
+        controls,
+        horizon: TEST_HORIZON,
+        network: NetworkInfo {
+            kind: "siren".into(),
+            hidden: network.hidden_widths(),
+            omega_0: 30.0,
+            exact_boundary: true,
+        },
+        teb_table: hand_made_table(system),
+        untrained: true,
+        provenance: Provenance {
+            method: "test fixture".into(),
+            config: serde_json::json!({ "seed": seed }),
+            iterations: 0,
+            final_losses: Default::default(),
+            wall_time_s: 0.0,
+            machine: "test".into(),
+            source_revision: "test".into(),
+            created: "2026-01-01T00:00:00Z".into(),
+        },
+        onnx_sha256: String::new(),
+    };
+    Bundle::write(root, manifest, &onnx).expect("write test bundle")
+}
+
+/// An in-process evaluator of a bundle folder (the reference for served answers).
+pub fn evaluator_for(dir: &Path) -> (Evaluator, Manifest) {
+    let bundle = Bundle::load(dir).expect("bundle loads");
+    let m = bundle.manifest.clone();
+    let dims = GraphDims { n_state: m.n_state(), n_params: m.n_params(), n_control: m.n_control() };
+    let rt = runtime(None).expect("ONNX Runtime (run scripts/setup-onnxruntime.sh)");
+    (Evaluator::new(rt, &bundle.onnx, dims, 1).expect("evaluator"), m)
+}
+
+/// Path of the `fastrack-server` binary built beside this test executable (`target/<profile>/`).
+pub fn server_binary() -> PathBuf {
+    let exe = std::env::current_exe().expect("test executable path");
+    let profile_dir = exe.parent().and_then(Path::parent).expect("target/<profile>/deps/<test>");
+    let binary = profile_dir.join("fastrack-server");
+    assert!(
+        binary.is_file(),
+        "{} is missing: build it first (`cargo build --workspace --bins`, which scripts/test.sh does)",
+        binary.display()
+    );
+    binary
+}
+
+fn free_port() -> u16 {
+    std::net::TcpListener::bind("127.0.0.1:0").expect("bind").local_addr().expect("addr").port()
+}
+
+/// A running server process; killed (and its log checked for panics) on drop.
+pub struct TestServer {
+    child: Child,
+    /// `http://127.0.0.1:<port>`.
+    pub endpoint: String,
+    log: PathBuf,
+    _log_dir: tempfile::TempDir,
+}
+
+impl TestServer {
+    /// Starts the server on `models` with extra arguments; does not wait for health.
+    pub fn start(models: &Path, extra_args: &[&str]) -> Self {
+        let port = free_port();
+        let log_dir = tempfile::tempdir().expect("tempdir");
+        let log = log_dir.path().join("server.log");
+        let log_file = std::fs::File::create(&log).expect("log file");
+        let child = Command::new(server_binary())
+            .arg("--listen")
+            .arg(format!("127.0.0.1:{port}"))
+            .arg("--models")
+            .arg(models)
+            .args(extra_args)
+            .env("FASTRACK_LOG", "info")
+            .stdout(Stdio::null())
+            .stderr(log_file)
+            .spawn()
+            .expect("spawn fastrack-server");
+        Self { child, endpoint: format!("http://127.0.0.1:{port}"), log, _log_dir: log_dir }
+    }
+
+    /// Connects a client, retrying while the server binds its port.
+    pub async fn client(&self) -> FastrackClient {
+        let options =
+            ClientOptions { connect_timeout: Duration::from_secs(2), request_timeout: Duration::from_secs(10) };
+        for _ in 0..200 {
+            if let Ok(client) = FastrackClient::connect(&self.endpoint, options).await {
+                return client;
+            }
+            tokio::time::sleep(Duration::from_millis(50)).await;
+        }
+        panic!("server at {} never accepted a connection; log:\n{}", self.endpoint, self.log_text());
+    }
+
+    /// Starts the server and waits until health is SERVING.
+    pub async fn start_serving(models: &Path) -> (Self, FastrackClient) {
+        let server = Self::start(models, &[]);
+        let client = server.client().await;
+        if client.wait_until_serving(Duration::from_secs(60)).await.is_err() {
+            panic!("server never became SERVING; log:\n{}", server.log_text());
+        }
+        (server, client)
+    }
+
+    /// The server's log so far.
+    pub fn log_text(&self) -> String {
+        std::fs::read_to_string(&self.log).unwrap_or_default()
+    }
+
+    /// True while the process runs.
+    pub fn is_running(&mut self) -> bool {
+        matches!(self.child.try_wait(), Ok(None))
+    }
+
+    /// Sends SIGTERM and waits for the exit status (graceful shutdown).
+    pub fn terminate(&mut self) -> std::process::ExitStatus {
+        let _ = Command::new("kill").arg("-TERM").arg(self.child.id().to_string()).status();
+        for _ in 0..200 {
+            if let Ok(Some(status)) = self.child.try_wait() {
+                return status;
+            }
+            std::thread::sleep(Duration::from_millis(25));
+        }
+        let _ = self.child.kill();
+        self.child.wait().expect("wait")
+    }
+}
+
+impl Drop for TestServer {
+    fn drop(&mut self) {
+        let _ = self.child.kill();
+        let _ = self.child.wait();
+        let log = self.log_text();
+        if !std::thread::panicking() {
+            assert!(!log.contains("panicked"), "the server panicked:\n{log}");
+        }
+    }
+}

@@ -1,0 +1,231 @@
+//! Bad input against the real server: each gets its status code and a message naming the field and what
+//! is allowed; broken bundles are rejected with the reason while the other models keep serving.
+
+use fastrack_client::{model_ref, pb, ClientError, FastrackClient};
+use fastrack_e2e::{write_test_bundle, TestServer};
+use fastrack_valuefn::system::dubins4d;
+use std::time::Duration;
+use tonic::Code;
+
+/// Asserts the call failed with `code` and a message containing every fragment.
+fn expect_error<T: std::fmt::Debug>(result: Result<T, ClientError>, code: Code, fragments: &[&str]) {
+    match result {
+        Err(ClientError::Status(status)) => {
+            assert_eq!(status.code(), code, "wrong code for {:?}", status.message());
+            for fragment in fragments {
+                assert!(status.message().contains(fragment), "message {:?} lacks {fragment:?}", status.message());
+            }
+        }
+        other => panic!("expected {code:?}, got {other:?}"),
+    }
+}
+
+fn good() -> pb::ModelRef {
+    model_ref("good", 0)
+}
+
+async fn evaluate(
+    client: &FastrackClient,
+    states: Vec<f64>,
+    params: Vec<f64>,
+) -> Result<pb::EvaluateValueResponse, ClientError> {
+    client.evaluate_value(good(), states, params, pb::OutOfDomainPolicy::Unspecified).await
+}
+
+/// Writes the repository: one good bundle and one of each kind of broken bundle.
+fn broken_repository() -> tempfile::TempDir {
+    let repo = tempfile::tempdir().unwrap();
+    let system = dubins4d::system();
+    write_test_bundle(repo.path(), &system, "good", 1, 1);
+
+    // Checksum mismatch: one byte of the graph changed after writing.
+    let dir = write_test_bundle(repo.path(), &system, "bad-checksum", 1, 2);
+    let mut onnx = std::fs::read(dir.join("model.onnx")).unwrap();
+    let last = onnx.len() - 1;
+    onnx[last] ^= 0xff;
+    std::fs::write(dir.join("model.onnx"), onnx).unwrap();
+
+    // Corrupt graph whose checksum matches (so the graph itself is what fails).
+    let dir = write_test_bundle(repo.path(), &system, "corrupt-onnx", 1, 3);
+    let garbage = b"this is not an ONNX model".to_vec();
+    let manifest = std::fs::read_to_string(dir.join("manifest.json")).unwrap();
+    let old_sha = fastrack_valuefn::bundle::sha256_hex(&std::fs::read(dir.join("model.onnx")).unwrap());
+    std::fs::write(
+        dir.join("manifest.json"),
+        manifest.replace(&old_sha, &fastrack_valuefn::bundle::sha256_hex(&garbage)),
+    )
+    .unwrap();
+    std::fs::write(dir.join("model.onnx"), garbage).unwrap();
+
+    // Manifest failing the schema (an unknown field).
+    let dir = write_test_bundle(repo.path(), &system, "bad-schema", 1, 4);
+    let manifest = std::fs::read_to_string(dir.join("manifest.json")).unwrap();
+    std::fs::write(
+        dir.join("manifest.json"),
+        manifest.replacen("\"horizon\"", "\"colour\": \"blue\",\n  \"horizon\"", 1),
+    )
+    .unwrap();
+
+    // Manifest failing validation (a horizon of zero).
+    let dir = write_test_bundle(repo.path(), &system, "bad-horizon", 1, 5);
+    let manifest = std::fs::read_to_string(dir.join("manifest.json")).unwrap();
+    std::fs::write(dir.join("manifest.json"), manifest.replacen("\"horizon\": 1.0", "\"horizon\": 0.0", 1)).unwrap();
+    repo
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn broken_bundles_are_rejected_with_reasons_and_the_rest_serves() {
+    let repo = broken_repository();
+    let (mut server, client) = TestServer::start_serving(repo.path()).await;
+    let models = client.list_models().await.unwrap();
+    assert_eq!(models.iter().map(|m| m.name.as_str()).collect::<Vec<_>>(), ["good"]);
+    let log = server.log_text();
+    assert!(log.contains("bad-checksum/1/model.onnx: sha256 is"), "{log}");
+    assert!(log.contains("invalid ONNX graph"), "{log}");
+    assert!(log.contains("does not match schema version 1") && log.contains("unknown field `colour`"), "{log}");
+    assert!(log.contains("manifest field `horizon`: must be finite and > 0, got 0"), "{log}");
+
+    // The admin surface reports the same reasons.
+    expect_error(client.load_model("bad-checksum", 1).await, Code::FailedPrecondition, &["sha256", "manifest says"]);
+    expect_error(client.load_model("corrupt-onnx", 0).await, Code::FailedPrecondition, &["invalid ONNX graph"]);
+    expect_error(client.load_model("no-such-model", 0).await, Code::NotFound, &["no folder no-such-model"]);
+    let outcomes = client.reload_model("").await.unwrap();
+    assert_eq!(outcomes.iter().filter(|o| o.loaded).count(), 1);
+    assert_eq!(outcomes.iter().filter(|o| !o.loaded && !o.error.is_empty()).count(), 4);
+
+    assert!(server.is_running());
+    assert!(evaluate(&client, vec![0.0, 0.0, 0.0, 1.0], vec![1.0, 1.0]).await.is_ok(), "good model still serves");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_requests_get_their_status_and_a_precise_message() {
+    let repo = tempfile::tempdir().unwrap();
+    write_test_bundle(repo.path(), &dubins4d::system(), "good", 1, 1);
+    let (mut server, client) = TestServer::start_serving(repo.path()).await;
+    let ok_state = vec![0.1, 0.2, 0.3, 1.0];
+
+    // Non-finite numbers.
+    expect_error(
+        evaluate(&client, vec![0.1, 0.2, f64::NAN, 1.0], vec![1.0, 1.0]).await,
+        Code::InvalidArgument,
+        &["states[2]", "theta", "NaN", "finite"],
+    );
+    expect_error(
+        evaluate(&client, vec![0.1, f64::INFINITY, 0.0, 1.0], vec![1.0, 1.0]).await,
+        Code::InvalidArgument,
+        &["states[1]", "y_r", "inf"],
+    );
+    expect_error(
+        evaluate(&client, ok_state.clone(), vec![1.0, f64::NEG_INFINITY]).await,
+        Code::InvalidArgument,
+        &["params[1]", "beta_2", "-inf"],
+    );
+    // Wrong lengths.
+    expect_error(
+        evaluate(&client, vec![0.0; 5], vec![1.0, 1.0]).await,
+        Code::InvalidArgument,
+        &["states has 5 values", "n_state = 4", "x_r, y_r, theta, v"],
+    );
+    expect_error(evaluate(&client, vec![], vec![]).await, Code::InvalidArgument, &["states has 0 values"]);
+    expect_error(
+        evaluate(&client, ok_state.clone(), vec![1.0]).await,
+        Code::InvalidArgument,
+        &["params has 1 values", "1 x 2 = 2", "beta_1, beta_2"],
+    );
+    // beta outside the range.
+    expect_error(
+        evaluate(&client, ok_state.clone(), vec![1.0, 2.0]).await,
+        Code::InvalidArgument,
+        &["params[1]", "beta_2", "= 2", "[0.5, 1.25]"],
+    );
+    expect_error(
+        evaluate(&client, ok_state.clone(), vec![0.1, 1.0]).await,
+        Code::InvalidArgument,
+        &["beta_1", "= 0.1"],
+    );
+    expect_error(
+        client.tracking_error_bound(good(), 1.3, 0).await,
+        Code::InvalidArgument,
+        &["beta = 1.3", "[0.5, 1.25]"],
+    );
+    expect_error(client.tracking_error_bound(good(), f64::NAN, 0).await, Code::InvalidArgument, &["beta = NaN"]);
+    expect_error(
+        client.tracking_error_bound(good(), 1.0, 5000).await,
+        Code::InvalidArgument,
+        &["boundary_points = 5000", "at most 4096"],
+    );
+    expect_error(
+        client.query_planner_control(good(), Some(-1.0)).await,
+        Code::InvalidArgument,
+        &["d_obs = -1", ">= 0"],
+    );
+    expect_error(client.query_planner_control(good(), Some(f64::NAN)).await, Code::InvalidArgument, &["d_obs = NaN"]);
+
+    // Outside the domain: one item is rejected, a batch is flagged, REJECT names the item.
+    expect_error(
+        evaluate(&client, vec![3.5, 0.0, 0.0, 1.0], vec![1.0, 1.0]).await,
+        Code::OutOfRange,
+        &["states[0]", "x_r", "3.5", "[-3, 3]"],
+    );
+    let flagged = evaluate(&client, vec![0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 3.2], vec![1.0; 4]).await.unwrap();
+    assert_eq!(flagged.in_domain, vec![true, false]);
+    expect_error(
+        client
+            .tracking_control(
+                good(),
+                vec![0.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 3.2],
+                vec![1.0; 4],
+                pb::OutOfDomainPolicy::Reject,
+            )
+            .await,
+        Code::OutOfRange,
+        &["states[7]", "item 1", "v", "[0, 3]"],
+    );
+    // Angles are periodic, never out of domain.
+    assert_eq!(evaluate(&client, vec![0.0, 0.0, 40.0, 1.0], vec![1.0, 1.0]).await.unwrap().in_domain, vec![true]);
+
+    // Unknown models and versions, missing names.
+    expect_error(
+        client.get_model(model_ref("nope", 0)).await,
+        Code::NotFound,
+        &["\"nope\" is not loaded", "loaded models: good"],
+    );
+    expect_error(client.get_model(model_ref("good", 9)).await, Code::NotFound, &["no loaded version 9", "[1]"]);
+    expect_error(
+        client.query_planner_control(model_ref("", 0), None).await,
+        Code::InvalidArgument,
+        &["model.name is required"],
+    );
+    expect_error(client.unload_model("nope", 0).await, Code::NotFound, &["\"nope\""]);
+
+    // Track: the first message must open the stream; an unknown model ends it with NOT_FOUND.
+    match client.track(model_ref("nope", 0), 1.0).await {
+        Err(e) => assert_eq!(e.code(), Some(Code::NotFound)),
+        Ok(mut session) => expect_error(session.recv().await, Code::NotFound, &["nope"]),
+    }
+
+    assert!(server.is_running(), "the server survived every bad request");
+    assert!(evaluate(&client, ok_state, vec![1.0, 1.0]).await.is_ok());
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn empty_repository_is_unavailable_and_not_serving() {
+    let repo = tempfile::tempdir().unwrap();
+    let server = TestServer::start(repo.path(), &[]);
+    let client = server.client().await;
+    // Wait for the loader to finish (it logs that nothing loaded).
+    for _ in 0..200 {
+        if server.log_text().contains("no model loaded") {
+            break;
+        }
+        tokio::time::sleep(Duration::from_millis(25)).await;
+    }
+    assert!(server.log_text().contains("no model loaded"), "{}", server.log_text());
+    assert_eq!(client.health().await.unwrap(), fastrack_client::HealthStatus::NotServing);
+    expect_error(
+        client.query_planner_control(model_ref("any", 0), None).await,
+        Code::Unavailable,
+        &["no model is loaded"],
+    );
+    assert!(client.list_models().await.unwrap().is_empty());
+}
