@@ -106,7 +106,10 @@ pub async fn run(config: ServerConfig) -> anyhow::Result<()> {
         .add_service(ModelServiceServer::new(services::models::Models { repository: Arc::clone(&repository) }))
         .add_service(ModelAdminServiceServer::new(services::admin::Admin { repository: Arc::clone(&repository) }))
         .add_service(SafetyServiceServer::new(safety))
-        .serve_with_incoming_shutdown(tokio_stream::wrappers::TcpListenerStream::new(listener), shutdown_signal())
+        .serve_with_incoming_shutdown(
+            tonic::transport::server::TcpIncoming::from(listener).with_nodelay(Some(true)),
+            shutdown_signal(),
+        )
         .await
         .context("serving")?;
     loader.abort();

@@ -43,7 +43,7 @@ pub fn batch(
     let (ns, np) = (m.n_state(), m.n_params());
     let state_names: Vec<&str> = m.state.iter().map(|d| d.name.as_str()).collect();
     let param_names: Vec<&str> = m.params.iter().map(|d| d.name.as_str()).collect();
-    if states.is_empty() || states.len() % ns != 0 {
+    if states.is_empty() || !states.len().is_multiple_of(ns) {
         return Err(Status::invalid_argument(format!(
             "states has {} values; must be a positive multiple of n_state = {ns} ({}), row-major [N x {ns}]",
             states.len(),

@@ -41,10 +41,20 @@ pub fn test_network(system: &AffineSystem, seed: u64) -> ValueNetwork {
     network
 }
 
-/// Writes `<root>/<name>/<version>/` from a seeded network with the hand-made table; returns the folder.
+/// Writes `<root>/<name>/<version>/` from a seeded test network with the hand-made table.
 pub fn write_test_bundle(root: &Path, system: &AffineSystem, name: &str, version: u32, seed: u64) -> PathBuf {
-    let network = test_network(system, seed);
-    let onnx = write_value_graph(&network, system, TEST_HORIZON);
+    write_network_bundle(root, system, name, version, &test_network(system, seed))
+}
+
+/// Writes `<root>/<name>/<version>/` from `network` with the hand-made table; returns the folder.
+pub fn write_network_bundle(
+    root: &Path,
+    system: &AffineSystem,
+    name: &str,
+    version: u32,
+    network: &ValueNetwork,
+) -> PathBuf {
+    let onnx = write_value_graph(network, system, TEST_HORIZON);
     let (state, planner_to_state, params, controls) = Manifest::describe_system(system);
     let manifest = Manifest {
         schema_version: SCHEMA_VERSION,
@@ -66,7 +76,7 @@ pub fn write_test_bundle(root: &Path, system: &AffineSystem, name: &str, version
         untrained: true,
         provenance: Provenance {
             method: "test fixture".into(),
-            config: serde_json::json!({ "seed": seed }),
+            config: serde_json::json!({ "hidden": network.hidden_widths() }),
             iterations: 0,
             final_losses: Default::default(),
             wall_time_s: 0.0,

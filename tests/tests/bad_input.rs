@@ -229,3 +229,35 @@ async fn empty_repository_is_unavailable_and_not_serving() {
     );
     assert!(client.list_models().await.unwrap().is_empty());
 }
+
+#[test]
+fn missing_or_broken_onnx_runtime_library_fails_with_a_fix_not_a_panic() {
+    let repo = tempfile::tempdir().unwrap();
+    write_test_bundle(repo.path(), &dubins4d::system(), "good", 1, 1);
+    let run = |library: &std::path::Path| {
+        std::process::Command::new(fastrack_e2e::server_binary())
+            .args(["--listen", "127.0.0.1:0", "--models"])
+            .arg(repo.path())
+            .arg("--ort-lib")
+            .arg(library)
+            .output()
+            .unwrap()
+    };
+    let missing = run(std::path::Path::new("/nonexistent/libonnxruntime.so.1.31.1"));
+    let stderr = String::from_utf8_lossy(&missing.stderr);
+    assert!(!missing.status.success());
+    assert!(stderr.contains("/nonexistent/libonnxruntime.so.1.31.1") && stderr.contains("no such file"), "{stderr}");
+    assert!(stderr.contains("scripts/setup-onnxruntime.sh"), "names the fix: {stderr}");
+    assert!(!stderr.contains("panicked"), "{stderr}");
+
+    let not_a_library = repo.path().join("libonnxruntime.so.1.31.1");
+    std::fs::write(&not_a_library, b"not a shared object").unwrap();
+    let broken = run(&not_a_library);
+    let stderr = String::from_utf8_lossy(&broken.stderr);
+    assert!(!broken.status.success());
+    assert!(
+        stderr.contains("cannot use ONNX Runtime library") && stderr.contains("scripts/setup-onnxruntime.sh"),
+        "{stderr}"
+    );
+    assert!(!stderr.contains("panicked"), "{stderr}");
+}

@@ -234,3 +234,52 @@ async fn track_stream_answers_every_tick_in_order_and_keeps_beta_old() {
         assert_eq!(session.recv().await.unwrap().unwrap().seq, seq);
     }
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn reflection_lists_and_describes_every_service() {
+    use tonic_reflection::pb::v1::server_reflection_client::ServerReflectionClient;
+    use tonic_reflection::pb::v1::server_reflection_request::MessageRequest;
+    use tonic_reflection::pb::v1::server_reflection_response::MessageResponse;
+    use tonic_reflection::pb::v1::ServerReflectionRequest;
+
+    let repo = tempfile::tempdir().unwrap();
+    write_test_bundle(repo.path(), &dubins4d::system(), "dubins-test", 1, 1);
+    let (server, _client) = TestServer::start_serving(repo.path()).await;
+    let channel = tonic::transport::Endpoint::from_shared(server.endpoint.clone()).unwrap().connect().await.unwrap();
+    let mut reflection = ServerReflectionClient::new(channel);
+    let ask = |request: MessageRequest| {
+        tokio_stream::iter([ServerReflectionRequest { host: String::new(), message_request: Some(request) }])
+    };
+
+    // `grpcurl list`
+    let mut replies =
+        reflection.server_reflection_info(ask(MessageRequest::ListServices(String::new()))).await.unwrap().into_inner();
+    let Some(MessageResponse::ListServicesResponse(list)) = replies.message().await.unwrap().unwrap().message_response
+    else {
+        panic!("expected a service list");
+    };
+    let mut names: Vec<String> = list.service.into_iter().map(|s| s.name).collect();
+    names.sort();
+    for expected in [
+        "fastrack.v1.ModelAdminService",
+        "fastrack.v1.ModelService",
+        "fastrack.v1.SafetyService",
+        "grpc.health.v1.Health",
+    ] {
+        assert!(names.iter().any(|n| n == expected), "{expected} missing from {names:?}");
+    }
+
+    // `grpcurl describe fastrack.v1.SafetyService`: the file defining it, with its RPCs.
+    let request = MessageRequest::FileContainingSymbol("fastrack.v1.SafetyService".into());
+    let mut replies = reflection.server_reflection_info(ask(request)).await.unwrap().into_inner();
+    let Some(MessageResponse::FileDescriptorResponse(files)) =
+        replies.message().await.unwrap().unwrap().message_response
+    else {
+        panic!("expected file descriptors");
+    };
+    let bytes: Vec<u8> = files.file_descriptor_proto.concat();
+    let text = String::from_utf8_lossy(&bytes);
+    for rpc in ["QueryPlannerControl", "GetTrackingErrorBound", "EvaluateValue", "TrackingControl", "Track"] {
+        assert!(text.contains(rpc), "descriptor lacks {rpc}");
+    }
+}

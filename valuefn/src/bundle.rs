@@ -123,9 +123,12 @@ pub struct VersionDir {
     pub path: PathBuf,
 }
 
+/// An entry of a repository that is not a version folder, and why.
+pub type Skipped = (PathBuf, String);
+
 /// Lists `<root>/<name>/<version>/` folders (versions are positive integers; other entries are
 /// reported in the second list with the reason they were skipped).
-pub fn scan_repository(root: &Path) -> std::io::Result<(Vec<VersionDir>, Vec<(PathBuf, String)>)> {
+pub fn scan_repository(root: &Path) -> std::io::Result<(Vec<VersionDir>, Vec<Skipped>)> {
     let mut found = Vec::new();
     let mut skipped = Vec::new();
     for model in std::fs::read_dir(root)? {

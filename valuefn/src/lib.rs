@@ -4,6 +4,7 @@
 //! - [`network`]: the SIREN value network and its f64 reference evaluation.
 //! - [`manifest`], [`bundle`]: the model bundle format and repository layout.
 //! - [`provenance`]: machine, revision and time stamps for manifests and bench records.
+//! - [`record`]: measurement records under `bench/results/`.
 //! - [`teb`]: TEB tables from a value function (`V_min` per `beta`, extent, boundary).
 //! - `onnx_writer` (feature `writer`): the network plus control law as an ONNX graph.
 //! - `runtime` (feature `runtime`): ONNX Runtime loading and a pooled batch evaluator.
@@ -12,6 +13,7 @@ pub mod bundle;
 pub mod manifest;
 pub mod network;
 pub mod provenance;
+pub mod record;
 pub mod system;
 pub mod teb;
 

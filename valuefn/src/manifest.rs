@@ -320,7 +320,7 @@ impl Manifest {
         if !(self.horizon.is_finite() && self.horizon > 0.0) {
             return fail("horizon", format!("must be finite and > 0, got {}", self.horizon));
         }
-        if self.network.omega_0 <= 0.0 || self.network.hidden.iter().any(|&w| w == 0) {
+        if self.network.omega_0 <= 0.0 || self.network.hidden.contains(&0) {
             return fail("network", "omega_0 must be > 0 and hidden widths > 0");
         }
         self.validate_teb_table(beta_l, beta_u)?;

@@ -51,6 +51,13 @@ pub struct Runtime {
     pub library: PathBuf,
 }
 
+impl Runtime {
+    /// The `ort` environment, for callers that build their own sessions (benchmarks).
+    pub fn environment(&self) -> &ort::environment::Environment {
+        &self.env
+    }
+}
+
 static RUNTIME: OnceLock<Result<Runtime, RuntimeError>> = OnceLock::new();
 
 fn find_in(dir: &Path, depth: usize) -> Option<PathBuf> {

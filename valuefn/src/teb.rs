@@ -210,7 +210,7 @@ pub fn teb_table(oracle: &dyn ValueOracle, system: &AffineSystem, options: &TebO
         };
         let params = vec![beta; system.n_params()];
         let (measured_min, _) = minimise(oracle, system, &params, options, &mut rng)?;
-        if !(measured_min > 0.0) {
+        if measured_min.is_nan() || measured_min <= 0.0 {
             return Err(format!(
                 "V_min = {measured_min} at beta = {beta}: a tracking value function satisfies V >= l(r) >= 0 and has a positive minimum; this one is wrong there"
             ));

@@ -185,7 +185,7 @@ fn model_text(m: &pb::ModelInfo) -> String {
 async fn batch(client: &FastrackClient, args: BatchArgs, control_only: bool, json_mode: bool) -> anyhow::Result<()> {
     let info = client.get_model(model_ref(&args.name, args.version)).await?;
     let (ns, np, nc) = (info.state.len(), info.params.len(), info.controls.len());
-    anyhow::ensure!(args.states.len() % ns == 0, "each --state needs {ns} numbers");
+    anyhow::ensure!(args.states.len().is_multiple_of(ns), "each --state needs {ns} numbers");
     let n = args.states.len() / ns;
     let params = match (args.params, args.beta) {
         (Some(p), _) => p.iter().copied().cycle().take(n * p.len().max(1)).collect::<Vec<_>>(),

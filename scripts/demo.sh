@@ -1,0 +1,31 @@
+#!/usr/bin/env bash
+# The main job: starts the server on the shipped model repository (models/) and drives it with a short
+# scripted client session through the `fastrack` CLI, then shuts the server down gracefully.
+set -euo pipefail
+cd "$(dirname "$0")/.."
+bash scripts/setup-onnxruntime.sh >/dev/null
+cargo build -j2 -p fastrack-server -p fastrack-client --bins
+port=${FASTRACK_DEMO_PORT:-50151}
+export FASTRACK_SERVER="http://127.0.0.1:$port"
+./target/debug/fastrack-server --listen "127.0.0.1:$port" --models models &
+server=$!
+trap 'kill $server 2>/dev/null || true' EXIT
+for _ in $(seq 1 100); do
+  [[ "$(./target/debug/fastrack health 2>/dev/null)" == SERVING ]] && break
+  sleep 0.2
+done
+fastrack() { echo; echo "\$ fastrack $*"; ./target/debug/fastrack "$@"; }
+model=$(./target/debug/fastrack models --json | python3 -c 'import json,sys; m=[x for x in json.load(sys.stdin) if x["default_version"]]; print(m[0]["name"])')
+fastrack health
+fastrack models
+fastrack model "$model"
+fastrack query "$model"
+fastrack query "$model" --d-obs 0.5
+fastrack teb "$model" --beta 0.9 --boundary 8
+fastrack control "$model" --state 0.2,-0.1,0.3,1.0 --state 0.5,0.5,-1.0,1.5 --beta 1.0
+fastrack evaluate "$model" --state 0.2,-0.1,0.3,1.0 --beta 0.75
+fastrack track "$model" --ticks 20
+echo
+kill -TERM $server
+wait $server && echo "server shut down cleanly"
+trap - EXIT

@@ -1,0 +1,109 @@
+//! Manifest validation and bundle checks: each failure names its field or file.
+
+use fastrack_valuefn::bundle::{Bundle, BundleError};
+use fastrack_valuefn::manifest::{Manifest, NetworkInfo, Provenance, SystemInfo, TebRow, SCHEMA_VERSION};
+use fastrack_valuefn::system::dubins4d;
+
+fn manifest() -> Manifest {
+    let system = dubins4d::system();
+    let (state, planner_to_state, params, controls) = Manifest::describe_system(&system);
+    Manifest {
+        schema_version: SCHEMA_VERSION,
+        name: "m".into(),
+        version: 1,
+        system: SystemInfo { id: "dubins4d".into(), description: "d".into() },
+        state,
+        planner_to_state,
+        params,
+        controls,
+        horizon: 1.0,
+        network: NetworkInfo { kind: "siren".into(), hidden: vec![8], omega_0: 30.0, exact_boundary: true },
+        teb_table: (0..16)
+            .map(|k| TebRow {
+                beta: 0.5 + 0.05 * k as f64,
+                level: 0.3 + 0.01 * k as f64,
+                measured_min: 0.3,
+                extent: vec![0.1, 0.1],
+                boundary_radii: vec![0.1; 8],
+                verification: None,
+            })
+            .collect(),
+        untrained: true,
+        provenance: Provenance {
+            method: "test".into(),
+            config: serde_json::Value::Null,
+            iterations: 0,
+            final_losses: Default::default(),
+            wall_time_s: 0.0,
+            machine: String::new(),
+            source_revision: String::new(),
+            created: String::new(),
+        },
+        onnx_sha256: "0".repeat(64),
+    }
+}
+
+fn field_error(m: Manifest) -> String {
+    let err = m.validate().expect_err("must be rejected");
+    format!("{}: {}", err.field, err.problem)
+}
+
+#[test]
+fn valid_manifest_round_trips_through_json() {
+    let m = manifest();
+    m.validate().unwrap();
+    assert_eq!(Manifest::from_json(&m.to_json()).unwrap(), m);
+}
+
+#[test]
+fn each_invariant_names_its_field() {
+    let mut m = manifest();
+    m.schema_version = 2;
+    assert!(field_error(m).starts_with("schema_version: must be 1, got 2"));
+    let mut m = manifest();
+    m.version = 0;
+    assert!(field_error(m).starts_with("version:"));
+    let mut m = manifest();
+    m.state[0].max = f64::NAN;
+    assert!(field_error(m).starts_with("state[0] (x_r): bounds must be finite"));
+    let mut m = manifest();
+    m.params[1].min = 2.0;
+    assert!(field_error(m).starts_with("params[1] (beta_2): min must be < max"));
+    let mut m = manifest();
+    m.teb_table.truncate(5);
+    assert!(field_error(m).contains("at least 16 rows, got 5"));
+    let mut m = manifest();
+    m.teb_table[7].level = 0.1;
+    assert!(field_error(m).starts_with("teb_table[7]: levels must not decrease"));
+    let mut m = manifest();
+    m.teb_table[15].beta = 1.2;
+    assert!(field_error(m).contains("must span the parameter range [0.5, 1.25]"));
+    let mut m = manifest();
+    m.planner_to_state.pop();
+    assert!(field_error(m).starts_with("planner_to_state: must have one row per state coordinate (4), got 3"));
+    let mut m = manifest();
+    m.onnx_sha256 = "ABC".into();
+    assert!(field_error(m).starts_with("onnx_sha256: must be 64 lowercase hex digits"));
+}
+
+#[test]
+fn schema_violations_are_reported() {
+    let err = Manifest::from_json("{\"schema_version\": 1}").unwrap_err();
+    assert_eq!(err.field, "(schema)");
+    assert!(err.problem.contains("missing field"), "{}", err.problem);
+}
+
+#[test]
+fn bundle_checksum_and_location_are_checked() {
+    let root = tempfile::tempdir().unwrap();
+    let dir = Bundle::write(root.path(), manifest(), b"graph bytes").unwrap();
+    let loaded = Bundle::load(&dir).unwrap();
+    assert_eq!(loaded.onnx, b"graph bytes");
+    std::fs::write(dir.join("model.onnx"), b"graph bytez").unwrap();
+    assert!(matches!(Bundle::load(&dir), Err(BundleError::Checksum { .. })));
+    let moved = root.path().join("m").join("2");
+    std::fs::create_dir_all(&moved).unwrap();
+    std::fs::copy(dir.join("manifest.json"), moved.join("manifest.json")).unwrap();
+    let err = Bundle::load(&moved).unwrap_err();
+    assert!(err.to_string().contains("folder says m/2, manifest says m/1"), "{err}");
+}
