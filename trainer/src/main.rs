@@ -1,15 +1,18 @@
 //! `fastrack-trainer`: produces model bundles.
 
-mod export;
-
 use anyhow::Context;
 use clap::{Parser, Subcommand};
+use fastrack_trainer::config::TrainConfig;
+use fastrack_trainer::export;
+use fastrack_trainer::train::{checkpoint_network, train, RunDir, Session};
 use fastrack_valuefn::manifest::Provenance;
 use fastrack_valuefn::network::ValueNetwork;
 use fastrack_valuefn::system::{by_id, SYSTEM_IDS};
 use fastrack_valuefn::teb::TebOptions;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
 
 #[derive(Parser)]
 #[command(name = "fastrack-trainer", version, about = "Produces fastrack model bundles")]
@@ -49,6 +52,55 @@ enum Command {
         #[arg(long, default_value = "models")]
         out: PathBuf,
     },
+    /// Trains a value function (DeepReach) from a TOML config, checkpointing into a run directory.
+    Train {
+        /// The configuration (every hyperparameter).
+        #[arg(long)]
+        config: PathBuf,
+        /// Run directory: checkpoint/, losses.jsonl.
+        #[arg(long)]
+        run_dir: PathBuf,
+        /// Continue from the run directory's checkpoint.
+        #[arg(long)]
+        resume: bool,
+        /// Stop after this many iterations in this session (continue later with --resume).
+        #[arg(long)]
+        max_iterations: Option<u64>,
+        /// Compute device: flex (CPU), cuda, wgpu (the last two need the cargo features of that name).
+        #[arg(long, default_value = "flex")]
+        device: String,
+    },
+    /// Training-speed benchmark: the config's network and the paper's (3x512, 65,536 points), beside the
+    /// machine's matmul rate and PyTorch; writes bench/results/trainer-speed.{json,md}.
+    Bench {
+        /// The configuration whose network is benchmarked (and whose system and loss are used).
+        #[arg(long, default_value = "trainer/configs/dubins4d.toml")]
+        config: PathBuf,
+        /// Where the record goes.
+        #[arg(long, default_value = "bench/results")]
+        out: PathBuf,
+    },
+    /// Exports a run's checkpoint as a model bundle (TEB table, manifest with provenance, reload check).
+    Export {
+        /// Run directory.
+        #[arg(long)]
+        run_dir: PathBuf,
+        /// Repository root to write into.
+        #[arg(long, default_value = "models")]
+        out: PathBuf,
+    },
+}
+
+/// The burn device for a name.
+fn device(name: &str) -> anyhow::Result<burn::tensor::Device> {
+    Ok(match name {
+        "flex" => burn::tensor::Device::flex().autodiff(),
+        #[cfg(feature = "cuda")]
+        "cuda" => burn::tensor::Device::cuda(0).autodiff(),
+        #[cfg(feature = "wgpu")]
+        "wgpu" => burn::tensor::Device::wgpu(Default::default()).autodiff(),
+        other => anyhow::bail!("device {other:?} is not available in this build (flex always; cuda, wgpu with the cargo features of that name)"),
+    })
 }
 
 fn main() -> anyhow::Result<()> {
@@ -94,6 +146,132 @@ fn main() -> anyhow::Result<()> {
             let dir = export::export(&out, request)?;
             println!("{}", dir.display());
         }
+        Command::Train { config, run_dir, resume, max_iterations, device: device_name } => {
+            let config = TrainConfig::load(&config)?;
+            let device = device(&device_name)?;
+            let stop = Arc::new(AtomicBool::new(false));
+            let flag = Arc::clone(&stop);
+            ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;
+            let run = RunDir(run_dir);
+            let session = Session {
+                run: &run,
+                resume,
+                max_iterations,
+                progress: true,
+                stop: Arc::clone(&stop),
+                hamiltonian_sign: 1.0,
+            };
+            let (_, state) = train(&config, &device, session)?;
+            let figure = fastrack_trainer::report::plot_losses(&run)?;
+            eprintln!("loss curves: {}", figure.display());
+            if stop.load(Ordering::Relaxed) {
+                eprintln!("interrupted: checkpoint saved at iteration {} (continue with --resume)", state.iteration);
+            }
+            println!(
+                "iteration {} of {}, {:.0} s, last losses {:?}",
+                state.iteration, config.optimizer.iterations, state.wall_time_s, state.last_losses
+            );
+        }
+        Command::Bench { config, out } => run_bench(&TrainConfig::load(&config)?, &out)?,
+        Command::Export { run_dir, out } => {
+            let run = RunDir(run_dir);
+            let (network, state) = checkpoint_network(&run, &burn::tensor::Device::flex())?;
+            let system = state.config.system()?;
+            let losses = state.last_losses.unwrap_or_default();
+            let provenance = Provenance {
+                method: format!(
+                    "DeepReach ({:?} loss, {:?} parameters), burn",
+                    state.config.loss.form, state.config.parameter_mode
+                ),
+                config: serde_json::to_value(&state.config)?,
+                iterations: state.iteration,
+                final_losses: BTreeMap::from([
+                    ("total".into(), losses[0]),
+                    ("boundary".into(), losses[1]),
+                    ("residual".into(), losses[2]),
+                ]),
+                wall_time_s: state.wall_time_s,
+                machine: String::new(),
+                source_revision: String::new(),
+                created: String::new(),
+            };
+            let request = export::ExportRequest {
+                network: &network,
+                system: &system,
+                horizon: state.config.sampling.tau_max,
+                name: &state.config.export.name,
+                version: state.config.export.version,
+                untrained: false,
+                provenance,
+                teb: TebOptions::default(),
+            };
+            let dir = export::export(&out, request)?;
+            let manifest = fastrack_valuefn::bundle::Bundle::load(&dir)?.manifest;
+            fastrack_trainer::report::plot_teb(&run.0.join("teb.png"), &manifest.teb_table, &[])?;
+            println!("{}", dir.display());
+        }
     }
+    Ok(())
+}
+
+/// Runs the training-speed benchmark and writes its record.
+fn run_bench(config: &TrainConfig, out: &std::path::Path) -> anyhow::Result<()> {
+    use fastrack_trainer::bench::{
+        flops_per_iteration, iterations_per_second, matmul_gflops, torch_iterations_per_second, Case,
+    };
+    use fastrack_valuefn::record::{write_record, Table};
+    let device = burn::tensor::Device::flex().autodiff();
+    let n_in = 1 + config.system()?.n_state() + config.system()?.n_params();
+    let peak = matmul_gflops(2048, 5, &burn::tensor::Device::flex());
+    eprintln!("f32 matmul 2048^3 (burn flex): {peak:.1} GFLOP/s");
+    let shipped = Case {
+        width: config.network.hidden[0],
+        depth: config.network.hidden.len(),
+        points: config.sampling.points,
+        iterations: 10,
+    };
+    let paper = Case { width: 512, depth: 3, points: 65_536, iterations: 3 };
+    let mut table = Table::new(&[
+        "network x points",
+        "burn-flex it/s",
+        "GFLOP/iter",
+        "GFLOP/s",
+        "of matmul rate",
+        "PyTorch CPU it/s",
+        "flex / torch",
+    ]);
+    let mut figures = Vec::new();
+    for (label, case) in [("shipped", shipped), ("paper", paper)] {
+        let rate = iterations_per_second(config, &case, &device)?;
+        let gflop = flops_per_iteration(&case, n_in) / 1e9;
+        let torch = torch_iterations_per_second(&case);
+        let (torch_cell, ratio_cell) = match &torch {
+            Ok((t, _)) => (format!("{t:.3}"), format!("{:.2}", rate / t)),
+            Err(why) => (format!("n/a ({why})"), "-".into()),
+        };
+        eprintln!("{label}: {rate:.3} it/s, {:.1} GFLOP/s, torch {torch_cell}", rate * gflop);
+        table.row(vec![
+            format!("{}x{} x {}", case.depth, case.width, case.points),
+            format!("{rate:.3}"),
+            format!("{gflop:.1}"),
+            format!("{:.1}", rate * gflop),
+            format!("{:.0}%", 100.0 * rate * gflop / peak),
+            torch_cell,
+            ratio_cell,
+        ]);
+        figures.push(serde_json::json!({"case": label, "width": case.width, "depth": case.depth, "points": case.points,
+            "iterations_per_s": rate, "gflop_per_iteration": gflop, "gflops": rate * gflop,
+            "torch_iterations_per_s": torch.as_ref().ok().map(|t| t.0), "torch": torch.map(|t| t.1).unwrap_or_else(|e| e)}));
+    }
+    println!("matmul rate: {peak:.1} GFLOP/s\n\n{}", table.to_markdown());
+    let path = write_record(
+        out,
+        "trainer-speed",
+        "cargo run --release -p fastrack-trainer -- bench",
+        serde_json::json!({"system": config.system, "loss": config.loss.form, "parameter_mode": config.parameter_mode, "matmul_n": 2048}),
+        serde_json::json!({"matmul_gflops": peak, "cases": figures}),
+        &[("One DeepReach iteration (forward, explicit input gradient, HJI loss, backward, Adam)", &table)],
+    )?;
+    eprintln!("wrote {}", path.display());
     Ok(())
 }

@@ -7,6 +7,7 @@
 //! - [`record`]: measurement records under `bench/results/`.
 //! - [`teb`]: TEB tables from a value function (`V_min` per `beta`, extent, boundary).
 //! - `onnx_writer` (feature `writer`): the network plus control law as an ONNX graph.
+//! - `plot` (feature `plot`): PNG line charts.
 //! - `runtime` (feature `runtime`): ONNX Runtime loading and a pooled batch evaluator.
 
 pub mod bundle;
@@ -19,5 +20,7 @@ pub mod teb;
 
 #[cfg(feature = "writer")]
 pub mod onnx_writer;
+#[cfg(feature = "plot")]
+pub mod plot;
 #[cfg(feature = "runtime")]
 pub mod runtime;

@@ -90,9 +90,9 @@ fn project(system: &AffineSystem, r: &mut [f64]) {
     system.wrap(r);
 }
 
-/// Minimum of `V(., beta)` over the domain: dense uniform sampling, then projected gradient descent with
+/// Minimum of `V(., params)` over the domain: dense uniform sampling, then projected gradient descent with
 /// per-start backtracking from the best samples. Returns `(V_min, argmin)`.
-fn minimise(
+pub fn minimise(
     oracle: &dyn ValueOracle,
     system: &AffineSystem,
     params: &[f64],

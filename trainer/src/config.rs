@@ -1,0 +1,185 @@
+//! The training configuration: one TOML file holds every hyperparameter; validated before any work.
+
+use anyhow::{bail, ensure, Context};
+use fastrack_valuefn::system::{by_id, AffineSystem, SYSTEM_IDS};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// How the value is built from the network output `y`.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum LossForm {
+    /// The paper's: `V = y`, boundary loss `|V - l|` at `tau = 0` plus `lambda` times the HJI-VI residual,
+    /// after boundary-only pretraining.
+    Paper,
+    /// `V = l + tau * y`: the boundary condition holds exactly; residual only.
+    ExactBoundary,
+}
+
+/// How the planner bounds enter the network.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ParameterMode {
+    /// One input per planner bound (the paper's `beta_1`, `beta_2`).
+    Full,
+    /// One shared `beta` for every planner input (`beta_1 = beta_2`), halving the parameter space.
+    Diagonal,
+}
+
+/// Every hyperparameter of a run.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct TrainConfig {
+    /// System id.
+    pub system: String,
+    /// Parameter inputs.
+    pub parameter_mode: ParameterMode,
+    /// Random seed (initialisation and sampling).
+    pub seed: u64,
+    /// Network.
+    pub network: NetworkConfig,
+    /// Loss.
+    pub loss: LossConfig,
+    /// Sampling.
+    pub sampling: SamplingConfig,
+    /// Optimisation.
+    pub optimizer: OptimizerConfig,
+    /// Checkpoints and logs.
+    pub checkpoint_every: u64,
+    /// Bundle written by `export`.
+    pub export: ExportConfig,
+}
+
+/// Network shape.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct NetworkConfig {
+    /// Hidden layer widths.
+    pub hidden: Vec<usize>,
+    /// SIREN frequency.
+    pub omega_0: f64,
+    /// Output scale: `y` is multiplied by it.
+    pub output_scale: f64,
+    /// Output offset added after scaling.
+    pub output_offset: f64,
+}
+
+/// Loss.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct LossConfig {
+    /// Which form.
+    pub form: LossForm,
+    /// Weight of the residual term (paper form).
+    pub lambda: f64,
+    /// Boundary-only iterations before the residual enters (paper form).
+    pub pretrain_iterations: u64,
+}
+
+/// Collocation points.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SamplingConfig {
+    /// Points per iteration.
+    pub points: usize,
+    /// Share of them at `tau = 0`.
+    pub boundary_share: f64,
+    /// Largest horizon trained (s); the graph is exported at this horizon.
+    pub tau_max: f64,
+    /// Iterations over which the sampled horizon grows linearly from 0 to `tau_max` (after pretraining).
+    pub curriculum_iterations: u64,
+}
+
+/// Adam and its schedule.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct OptimizerConfig {
+    /// Total iterations.
+    pub iterations: u64,
+    /// Initial learning rate.
+    pub learning_rate: f64,
+    /// Learning rate at the last iteration (exponential decay in between).
+    pub final_learning_rate: f64,
+    /// Clip the gradient norm to this value, if set.
+    pub gradient_clip_norm: Option<f64>,
+}
+
+/// Where the trained model goes.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct ExportConfig {
+    /// Model name.
+    pub name: String,
+    /// Model version.
+    pub version: u32,
+}
+
+impl TrainConfig {
+    /// Reads and validates a TOML config.
+    pub fn load(path: &Path) -> anyhow::Result<Self> {
+        let text = std::fs::read_to_string(path).with_context(|| format!("reading {}", path.display()))?;
+        let config: TrainConfig = toml::from_str(&text).with_context(|| format!("parsing {}", path.display()))?;
+        config.validate().with_context(|| format!("invalid config {}", path.display()))?;
+        Ok(config)
+    }
+
+    /// The system being trained, in the chosen parameter mode.
+    pub fn system(&self) -> anyhow::Result<AffineSystem> {
+        let system = by_id(&self.system)
+            .with_context(|| format!("unknown system {:?}; known: {}", self.system, SYSTEM_IDS.join(", ")))?;
+        Ok(match self.parameter_mode {
+            ParameterMode::Full => system,
+            ParameterMode::Diagonal => system.with_shared_parameter(),
+        })
+    }
+
+    /// Checks every field before any work starts.
+    pub fn validate(&self) -> anyhow::Result<()> {
+        self.system()?;
+        let n = &self.network;
+        ensure!(!n.hidden.is_empty(), "network.hidden must list at least one layer");
+        ensure!(!n.hidden.contains(&0), "network.hidden widths must be > 0, got {:?}", n.hidden);
+        ensure!(n.omega_0 > 0.0 && n.omega_0.is_finite(), "network.omega_0 must be > 0");
+        ensure!(
+            n.output_scale.is_finite() && n.output_scale != 0.0,
+            "network.output_scale must be finite and non-zero"
+        );
+        ensure!(n.output_offset.is_finite(), "network.output_offset must be finite");
+        let l = &self.loss;
+        ensure!(l.lambda.is_finite() && l.lambda > 0.0, "loss.lambda must be > 0");
+        let s = &self.sampling;
+        ensure!(s.points >= 2, "sampling.points must be at least 2");
+        ensure!((0.0..1.0).contains(&s.boundary_share), "sampling.boundary_share must be in [0, 1)");
+        ensure!(s.tau_max.is_finite() && s.tau_max > 0.0, "sampling.tau_max must be > 0");
+        if l.form == LossForm::Paper && s.boundary_share * (s.points as f64) < 1.0 {
+            bail!("the paper loss needs boundary points: sampling.boundary_share * sampling.points must be >= 1");
+        }
+        let o = &self.optimizer;
+        ensure!(o.iterations > 0, "optimizer.iterations must be > 0");
+        ensure!(o.learning_rate > 0.0 && o.final_learning_rate > 0.0, "learning rates must be > 0");
+        ensure!(o.gradient_clip_norm.is_none_or(|c| c > 0.0), "optimizer.gradient_clip_norm must be > 0 when set");
+        ensure!(self.checkpoint_every > 0, "checkpoint_every must be > 0");
+        ensure!(!self.export.name.is_empty() && self.export.version > 0, "export needs a name and a positive version");
+        Ok(())
+    }
+
+    /// Learning rate at `iteration` (exponential decay).
+    pub fn learning_rate(&self, iteration: u64) -> f64 {
+        let o = &self.optimizer;
+        let progress = iteration as f64 / o.iterations as f64;
+        o.learning_rate * (o.final_learning_rate / o.learning_rate).powf(progress)
+    }
+
+    /// Largest horizon sampled at `iteration` (the curriculum).
+    pub fn tau_limit(&self, iteration: u64) -> f64 {
+        let start = if self.loss.form == LossForm::Paper { self.loss.pretrain_iterations } else { 0 };
+        let s = &self.sampling;
+        if iteration < start {
+            return 0.0;
+        }
+        if s.curriculum_iterations == 0 {
+            return s.tau_max;
+        }
+        s.tau_max * ((iteration - start) as f64 / s.curriculum_iterations as f64).min(1.0)
+    }
+}

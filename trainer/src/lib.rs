@@ -1,0 +1,12 @@
+//! The offline half of Parametric FaSTrack: DeepReach training of parametric value functions (burn) and
+//! their export as served, validated model bundles.
+
+pub mod bench;
+pub mod config;
+pub mod dynamics;
+pub mod export;
+pub mod model;
+pub mod objective;
+pub mod report;
+pub mod sampler;
+pub mod train;

@@ -1,0 +1,91 @@
+//! The SIREN value network in burn, with its input gradient written as explicit tensor operations (burn
+//! has first-order autodiff only, and DeepReach's loss needs `dV/dinput` inside the loss).
+
+use burn::module::{Module, Param};
+use burn::tensor::{Device, Tensor, TensorData};
+use fastrack_valuefn::network::{Dense, ValueNetwork};
+
+/// Trainable parameters: sine layers then a linear output layer. Weights are `[n_in, n_out]` (`y = x W + b`).
+#[derive(Module, Debug)]
+pub struct Siren {
+    weights: Vec<Param<Tensor<2>>>,
+    biases: Vec<Param<Tensor<1>>>,
+}
+
+/// Network outputs for a batch of normalised inputs.
+pub struct Forward {
+    /// Network output `y` `[N, 1]`.
+    pub output: Tensor<2>,
+    /// `dy/dx` with respect to the normalised inputs `[N, n_in]`.
+    pub input_grad: Tensor<2>,
+}
+
+fn tensor2(values: Vec<f32>, shape: [usize; 2], device: &Device) -> Tensor<2> {
+    Tensor::from_data(TensorData::new(values, shape), device)
+}
+
+impl Siren {
+    /// The burn copy of a reference network's weights (transposed to `[n_in, n_out]`).
+    pub fn from_network(network: &ValueNetwork, device: &Device) -> Self {
+        let weights = network
+            .layers
+            .iter()
+            .map(|layer| {
+                let transposed: Vec<f32> = (0..layer.n_in)
+                    .flat_map(|i| (0..layer.n_out).map(move |o| layer.weight[o * layer.n_in + i] as f32))
+                    .collect();
+                Param::from_tensor(tensor2(transposed, [layer.n_in, layer.n_out], device))
+            })
+            .collect();
+        let biases = network
+            .layers
+            .iter()
+            .map(|layer| {
+                let bias: Vec<f32> = layer.bias.iter().map(|&b| b as f32).collect();
+                Param::from_tensor(Tensor::from_data(TensorData::new(bias, [layer.n_out]), device))
+            })
+            .collect();
+        Self { weights, biases }
+    }
+
+    /// Writes the trained weights back into `network` (same architecture).
+    pub fn write_into(&self, network: &mut ValueNetwork) {
+        for (k, layer) in network.layers.iter_mut().enumerate() {
+            let w: Vec<f32> = self.weights[k].val().into_data().try_to_vec().expect("f32 weights");
+            let b: Vec<f32> = self.biases[k].val().into_data().try_to_vec().expect("f32 biases");
+            let (n_in, n_out) = (layer.n_in, layer.n_out);
+            let w = &w;
+            *layer = Dense {
+                n_in,
+                n_out,
+                weight: (0..n_out).flat_map(|o| (0..n_in).map(move |i| f64::from(w[i * n_out + o]))).collect(),
+                bias: b.iter().map(|&x| f64::from(x)).collect(),
+            };
+        }
+    }
+
+    /// `y` and `dy/dx` for normalised inputs `x` `[N, n_in]`: forward through `sin(omega_0 (x W + b))`
+    /// layers, then the backward pass `g = W_L^T; g = (omega_0 cos(omega_0 z_k) * g) W_k^T` as tensor ops,
+    /// so autodiff can differentiate the loss through both.
+    pub fn forward(&self, x: Tensor<2>, omega_0: f64) -> Forward {
+        let n_layers = self.weights.len();
+        let mut h = x;
+        let mut scaled_cos = Vec::with_capacity(n_layers - 1);
+        for k in 0..n_layers - 1 {
+            let z = (h.matmul(self.weights[k].val()) + self.biases[k].val().unsqueeze::<2>()).mul_scalar(omega_0);
+            scaled_cos.push(z.clone().cos().mul_scalar(omega_0));
+            h = z.sin();
+        }
+        let last = n_layers - 1;
+        let output = h.matmul(self.weights[last].val()) + self.biases[last].val().unsqueeze::<2>();
+        // d y / d h_L = W_out^T, broadcast over the batch.
+        let mut g = scaled_cos[last - 1].clone().mul(self.weights[last].val().transpose());
+        for k in (0..last).rev() {
+            g = g.matmul(self.weights[k].val().transpose());
+            if k > 0 {
+                g = g.mul(scaled_cos[k - 1].clone());
+            }
+        }
+        Forward { output, input_grad: g }
+    }
+}
