@@ -106,7 +106,7 @@ struct BatchArgs {
     /// Model name.
     name: String,
     /// A relative state, comma separated; repeat for a batch.
-    #[arg(long = "state", value_delimiter = ',', num_args = 1, action = clap::ArgAction::Append, required = true)]
+    #[arg(long = "state", value_delimiter = ',', num_args = 1, action = clap::ArgAction::Append, required = true, allow_hyphen_values = true)]
     states: Vec<f64>,
     /// Parameters of every item, comma separated (default: every parameter = --beta).
     #[arg(long, value_delimiter = ',')]

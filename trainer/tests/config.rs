@@ -1,0 +1,82 @@
+//! Bad configurations are rejected, with the field named, before any work starts; a resumed run continues
+//! exactly where an uninterrupted one would be.
+
+use fastrack_trainer::config::TrainConfig;
+use fastrack_trainer::train::{train, RunDir, Session};
+use std::path::Path;
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+fn base_text() -> String {
+    std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/double_integrator.toml")).unwrap()
+}
+
+fn load(text: &str) -> Result<TrainConfig, String> {
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("c.toml");
+    std::fs::write(&path, text).unwrap();
+    TrainConfig::load(&path).map_err(|e| format!("{e:#}"))
+}
+
+#[test]
+fn shipped_configs_are_valid() {
+    for name in ["double_integrator", "dubins4d"] {
+        let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("configs/{name}.toml"));
+        TrainConfig::load(&path).unwrap_or_else(|e| panic!("{name}: {e:#}"));
+    }
+}
+
+#[test]
+fn bad_configs_name_what_is_wrong() {
+    let cases = [
+        ("system = \"double_integrator\"", "system = \"unicycle\"", "unknown system \"unicycle\""),
+        ("hidden = [64, 64]", "hidden = [64, 0]", "network.hidden widths must be > 0"),
+        ("hidden = [64, 64]", "hidden = []", "network.hidden must list at least one layer"),
+        ("tau_max = 8.0", "tau_max = 0.0", "sampling.tau_max must be > 0"),
+        ("points = 4000", "points = 0", "sampling.points must be at least 2"),
+        ("iterations = 3000", "iterations = 0", "optimizer.iterations must be > 0"),
+        ("learning_rate = 1e-3", "learning_rate = -1e-3", "learning rates must be > 0"),
+        ("omega_0 = 30.0", "omega_0 = 30.0\ncolour = 3", "unknown field `colour`"),
+    ];
+    let base = base_text();
+    for (from, to, expected) in cases {
+        assert!(base.contains(from), "fixture lacks {from:?}");
+        let err = load(&base.replacen(from, to, 1)).expect_err(expected);
+        assert!(err.contains(expected), "{to:?}: error {err:?} lacks {expected:?}");
+    }
+}
+
+#[test]
+fn a_resumed_run_matches_an_uninterrupted_one() {
+    let mut config = load(&base_text()).unwrap();
+    config.network.hidden = vec![16, 16];
+    config.sampling.points = 256;
+    config.optimizer.iterations = 40;
+    config.checkpoint_every = 10;
+    let device = burn::tensor::Device::flex().autodiff();
+    fn session(run: &RunDir, resume: bool, max_iterations: Option<u64>) -> Session<'_> {
+        Session {
+            run,
+            resume,
+            max_iterations,
+            progress: false,
+            stop: Arc::new(AtomicBool::new(false)),
+            hamiltonian_sign: 1.0,
+        }
+    }
+    let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
+    let (whole_run, split_run) = (RunDir(a.path().into()), RunDir(b.path().into()));
+    let (whole, _) = train(&config, &device, session(&whole_run, false, None)).unwrap();
+    train(&config, &device, session(&split_run, false, Some(25))).unwrap();
+    assert_eq!(split_run.load_state().unwrap().iteration, 25);
+    let (resumed, state) = train(&config, &device, session(&split_run, true, None)).unwrap();
+    assert_eq!(state.iteration, 40);
+    let worst = whole
+        .layers
+        .iter()
+        .zip(&resumed.layers)
+        .flat_map(|(x, y)| x.weight.iter().zip(&y.weight))
+        .map(|(p, q)| (p - q).abs())
+        .fold(0.0, f64::max);
+    assert!(worst < 1e-5, "weights after 25 + 15 iterations differ from 40 straight by {worst:e}");
+}
