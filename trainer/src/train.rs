@@ -170,7 +170,7 @@ pub fn train(config: &TrainConfig, device: &Device, session: Session<'_>) -> any
         state.iteration += 1;
         state.last_losses = Some([terms.total, terms.boundary, terms.residual]);
         state.wall_time_s = wall_before + session_start.elapsed().as_secs_f64();
-        if it % 10 == 0 || state.iteration == end {
+        if it.is_multiple_of(10) || state.iteration == end {
             write_log_line(&mut log, it, &terms, config.tau_limit(it), config.learning_rate(it), state.wall_time_s)?;
             bar.set_message(format!(
                 "loss {:.3e} (bc {:.2e}, hji {:.2e})",
@@ -178,7 +178,7 @@ pub fn train(config: &TrainConfig, device: &Device, session: Session<'_>) -> any
             ));
         }
         bar.set_position(state.iteration);
-        if state.iteration % config.checkpoint_every == 0 {
+        if state.iteration.is_multiple_of(config.checkpoint_every) {
             save_checkpoint(run, &model, &optimizer, &state)?;
         }
     }

@@ -67,7 +67,7 @@ pub fn line_chart(path: &Path, chart: &Chart<'_>, series: &[Series]) -> Result<(
         y0 = y0.min(y);
         y1 = y1.max(y);
     }
-    if !(x0 < x1) || !(y0 <= y1) {
+    if x0 >= x1 || y0 > y1 {
         return Err(format!("nothing to plot in {}", path.display()));
     }
     let pad = if chart.log_y { 0.0 } else { 0.05 * (y1 - y0).max(1e-9) };

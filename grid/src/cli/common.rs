@@ -1,0 +1,106 @@
+//! Options shared by the subcommands: the system, its grid and the solver settings.
+
+use anyhow::{bail, Context};
+use fastrack_grid::grid::{Axis, Grid};
+use fastrack_grid::integrate::RkOrder;
+use fastrack_grid::solver::SolverConfig;
+use fastrack_grid::upwind::Accuracy;
+use fastrack_valuefn::system::{by_id, AffineSystem, SYSTEM_IDS};
+
+/// The grid and solver options of a solve.
+#[derive(clap::Args, Clone, Debug)]
+pub struct SolveOptions {
+    /// System id (dubins4d, double_integrator).
+    #[arg(long, default_value = "dubins4d")]
+    pub system: String,
+    /// Nodes per axis: one number for every axis, or one per axis, comma separated.
+    #[arg(long, value_delimiter = ',', default_value = "31")]
+    pub resolution: Vec<usize>,
+    /// Override an axis' bounds, `name=min:max` (repeatable), e.g. `x_r=-2:2`.
+    #[arg(long = "bounds")]
+    pub bounds: Vec<String>,
+    /// Derivative approximation: first, eno2, weno5.
+    #[arg(long, default_value = "weno5")]
+    pub accuracy: Accuracy,
+    /// TVD Runge-Kutta order: 1, 2, 3.
+    #[arg(long, default_value = "3")]
+    pub rk: RkOrder,
+    /// CFL number.
+    #[arg(long, default_value_t = 0.75)]
+    pub cfl: f64,
+    /// Largest horizon integrated (s).
+    #[arg(long, default_value_t = 30.0)]
+    pub horizon_cap: f64,
+    /// Converged when max |dV/dtau| over the grid falls below this (m/s).
+    #[arg(long, default_value_t = 0.01)]
+    pub tolerance: f64,
+}
+
+impl SolveOptions {
+    /// The system.
+    pub fn system(&self) -> anyhow::Result<AffineSystem> {
+        by_id(&self.system)
+            .with_context(|| format!("unknown system `{}`; known: {}", self.system, SYSTEM_IDS.join(", ")))
+    }
+
+    /// The solver configuration.
+    pub fn config(&self) -> SolverConfig {
+        SolverConfig {
+            accuracy: self.accuracy,
+            rk: self.rk,
+            cfl: self.cfl,
+            horizon_cap: self.horizon_cap,
+            tolerance: self.tolerance,
+            tracking: true,
+        }
+    }
+
+    /// The grid over the system's domain, with resolution and bound overrides applied.
+    pub fn grid(&self, system: &AffineSystem) -> anyhow::Result<Grid> {
+        let n = system.n_state();
+        let resolution = match self.resolution.len() {
+            1 => vec![self.resolution[0]; n],
+            k if k == n => self.resolution.clone(),
+            k => bail!("--resolution has {k} entries; give 1 or {n} (one per axis of {})", system.id),
+        };
+        let mut axes: Vec<Axis> = system
+            .state
+            .iter()
+            .zip(&resolution)
+            .map(|(d, &n)| Axis { name: d.name.into(), min: d.min, max: d.max, n, periodic: d.periodic })
+            .collect();
+        for spec in &self.bounds {
+            let (name, range) =
+                spec.split_once('=').with_context(|| format!("--bounds `{spec}`: expected name=min:max"))?;
+            let (lo, hi) =
+                range.split_once(':').with_context(|| format!("--bounds `{spec}`: expected name=min:max"))?;
+            let axis = axes.iter_mut().find(|a| a.name == name).with_context(|| {
+                format!(
+                    "--bounds `{spec}`: no axis `{name}`; axes: {}",
+                    system.state.iter().map(|d| d.name).collect::<Vec<_>>().join(", ")
+                )
+            })?;
+            axis.min = lo.trim().parse().with_context(|| format!("--bounds `{spec}`: min is not a number"))?;
+            axis.max = hi.trim().parse().with_context(|| format!("--bounds `{spec}`: max is not a number"))?;
+        }
+        Ok(Grid::new(axes)?)
+    }
+}
+
+/// Parameters for a `beta` query: every parameter equal to `beta`, checked against the system's range.
+pub fn params_for(system: &AffineSystem, beta: f64) -> anyhow::Result<Vec<f64>> {
+    if !beta.is_finite() || beta <= 0.0 {
+        bail!("beta = {beta} must be a positive number");
+    }
+    for p in &system.params {
+        if beta < p.min || beta > p.max {
+            tracing::warn!("beta = {beta} is outside {}'s range [{}, {}] of {}", p.name, p.min, p.max, system.id);
+        }
+    }
+    Ok(vec![beta; system.n_params()])
+}
+
+/// The command line as run, for records.
+pub fn command_line() -> String {
+    std::env::args().collect::<Vec<_>>().join(" ")
+}

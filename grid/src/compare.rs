@@ -1,0 +1,106 @@
+//! A model bundle against a grid solution at one `beta`: learned vs grid `V_min`, their ratio, the error of
+//! `V` over the grid's sublevel set, and the `(axis 0, axis 1)` slices of both value functions through the
+//! grid's minimiser.
+
+use crate::solver::Solution;
+use fastrack_valuefn::runtime::{Evaluator, RuntimeError};
+use serde::{Deserialize, Serialize};
+
+/// Grid nodes evaluated per ONNX batch.
+const BATCH: usize = 4096;
+
+/// The comparison at one `beta`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Comparison {
+    /// Planner speed bound.
+    pub beta: f64,
+    /// `min V_grid` over the nodes.
+    pub grid_v_min: f64,
+    /// `min V_learned` over the same nodes.
+    pub learned_v_min: f64,
+    /// `learned_v_min / grid_v_min`.
+    pub ratio: f64,
+    /// Level of the sublevel set the errors are taken over: `sublevel_factor * grid_v_min`.
+    pub set_level: f64,
+    /// Nodes in `{V_grid <= set_level}`.
+    pub set_nodes: usize,
+    /// Mean `|V_learned - V_grid|` over the set.
+    pub mean_abs_error: f64,
+    /// Max `|V_learned - V_grid|` over the set.
+    pub max_abs_error: f64,
+}
+
+/// Slices of both value functions in the plane of grid axes 0 and 1 through the grid's minimiser
+/// (row-major, axis 1 fastest).
+#[derive(Debug, Clone, PartialEq)]
+pub struct Slices {
+    /// Nodes along axis 0.
+    pub n0: usize,
+    /// Nodes along axis 1.
+    pub n1: usize,
+    /// Grid values.
+    pub grid: Vec<f64>,
+    /// Learned values.
+    pub learned: Vec<f64>,
+    /// Coordinates of the other axes where the plane was cut.
+    pub cut: Vec<f64>,
+}
+
+/// The learned values at every node of `solution`'s grid.
+pub fn learned_on_grid(evaluator: &Evaluator, solution: &Solution) -> Result<Vec<f64>, RuntimeError> {
+    let grid = &solution.grid;
+    let n = grid.ndim();
+    let params: Vec<f32> = solution.info.params.iter().map(|&p| p as f32).collect();
+    let mut values = Vec::with_capacity(grid.num_points());
+    let mut r = vec![0.0; n];
+    for start in (0..grid.num_points()).step_by(BATCH) {
+        let end = (start + BATCH).min(grid.num_points());
+        let mut states = Vec::with_capacity((end - start) * n);
+        for flat in start..end {
+            grid.point(flat, &mut r);
+            states.extend(r.iter().map(|&x| x as f32));
+        }
+        let batch_params: Vec<f32> = params.iter().copied().cycle().take((end - start) * params.len()).collect();
+        let out = evaluator.evaluate(&states, &batch_params)?;
+        values.extend(out.value.iter().map(|&v| f64::from(v)));
+    }
+    Ok(values)
+}
+
+/// Compares `learned` (values at the grid's nodes) with `solution` over `{V_grid <= factor V_min}`.
+pub fn compare(solution: &Solution, learned: &[f64], sublevel_factor: f64) -> Comparison {
+    let grid_v_min = solution.values.iter().copied().fold(f64::INFINITY, f64::min);
+    let learned_v_min = learned.iter().copied().fold(f64::INFINITY, f64::min);
+    let set_level = sublevel_factor * grid_v_min;
+    let (mut sum, mut max, mut count) = (0.0, 0.0f64, 0usize);
+    for (&g, &l) in solution.values.iter().zip(learned) {
+        if g <= set_level {
+            let e = (l - g).abs();
+            sum += e;
+            max = max.max(e);
+            count += 1;
+        }
+    }
+    Comparison {
+        beta: solution.info.params.first().copied().unwrap_or(f64::NAN),
+        grid_v_min,
+        learned_v_min,
+        ratio: learned_v_min / grid_v_min,
+        set_level,
+        set_nodes: count,
+        mean_abs_error: if count > 0 { sum / count as f64 } else { f64::NAN },
+        max_abs_error: max,
+    }
+}
+
+/// The plane of axes 0 and 1 through the grid's minimiser, for both value functions.
+pub fn slices(solution: &Solution, learned: &[f64]) -> Slices {
+    let grid = &solution.grid;
+    let best = solution.values.iter().enumerate().fold(0, |b, (i, &v)| if v < solution.values[b] { i } else { b });
+    let base: usize = (2..grid.ndim()).map(|k| grid.node(best, k) * grid.strides()[k]).sum();
+    let (n0, n1) = (grid.axes()[0].n, grid.axes()[1].n);
+    let (s0, s1) = (grid.strides()[0], grid.strides()[1]);
+    let pick = |values: &[f64]| (0..n0 * n1).map(|k| values[base + (k / n1) * s0 + (k % n1) * s1]).collect();
+    let cut = (2..grid.ndim()).map(|k| grid.axes()[k].coord(grid.node(best, k))).collect();
+    Slices { n0, n1, grid: pick(&solution.values), learned: pick(learned), cut }
+}

@@ -1,0 +1,222 @@
+//! Scenario verification on double-integrator bundles whose value function is known: a network fitted to
+//! the grid solution (random sine features, least-squares output layer), written as an ONNX bundle and run
+//! through ONNX Runtime like any served model.
+//!
+//! States are sampled under `(1 + margin) level` (see `fastrack_grid::verify`); here the margin is 0.
+//!
+//! - A correct table (the fitted value, level above its minimum) reports no violations.
+//! - A shrunk table (the same network and levels scaled down by 0.6, i.e. a model that underestimates the
+//!   value) reports violations and raises the level back to about what the correct table certifies.
+
+use fastrack_grid::grid::Grid;
+use fastrack_grid::solver::{solve, Solution, SolverConfig};
+use fastrack_grid::verify::{required_samples, verify_table, VerifyOptions};
+use fastrack_valuefn::bundle::Bundle;
+use fastrack_valuefn::manifest::{Manifest, NetworkInfo, Provenance, SystemInfo, TebRow, MIN_TEB_ROWS, SCHEMA_VERSION};
+use fastrack_valuefn::network::{Dense, ValueNetwork};
+use fastrack_valuefn::onnx_writer::write_value_graph;
+use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
+use fastrack_valuefn::system::double_integrator::system;
+use fastrack_valuefn::system::AffineSystem;
+use indicatif::ProgressBar;
+use nalgebra::{DMatrix, DVector};
+use rand::{Rng, SeedableRng};
+use std::sync::OnceLock;
+
+/// Random sine features of the fitted network.
+const FEATURES: usize = 256;
+/// Horizon written into the graph (the network does not depend on it).
+const HORIZON: f64 = 10.0;
+
+/// The grid solution at `beta_u` (solved once for every test).
+fn ground_truth() -> &'static (AffineSystem, Solution) {
+    static TRUTH: OnceLock<(AffineSystem, Solution)> = OnceLock::new();
+    TRUTH.get_or_init(|| {
+        let system = system();
+        let beta = system.params[0].max;
+        let grid = Grid::for_system(&system, &[161, 121]).unwrap();
+        let config = SolverConfig { tolerance: 0.02 * beta, ..SolverConfig::default() };
+        let solution = solve(&system, &[beta], &grid, &config, false).unwrap();
+        (system, solution)
+    })
+}
+
+/// A one-hidden-layer SIREN fitted to the grid solution: `V(r) = scale * (w . sin(W r_n + b) + c)`,
+/// independent of `tau` and `beta`.
+fn fitted_network(system: &AffineSystem, solution: &Solution, scale: f64) -> ValueNetwork {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+    let n_in = 1 + system.n_state() + system.n_params();
+    let input = ValueNetwork::normalization_for(system, HORIZON);
+    // Features over the normalised state only (inputs 1..=n_state).
+    let mut weight = vec![0.0; FEATURES * n_in];
+    for k in 0..FEATURES {
+        for i in 1..=system.n_state() {
+            weight[k * n_in + i] = rng.random_range(-6.0..6.0);
+        }
+    }
+    let bias: Vec<f64> = (0..FEATURES).map(|_| rng.random_range(-std::f64::consts::PI..std::f64::consts::PI)).collect();
+    let hidden = Dense { n_in, n_out: FEATURES, weight, bias };
+    let grid = &solution.grid;
+    let v_min = solution.values.iter().copied().fold(f64::INFINITY, f64::min);
+    let mut r = vec![0.0; grid.ndim()];
+    let (mut rows, mut targets, mut weights) = (Vec::new(), Vec::new(), Vec::new());
+    for (flat, &v) in solution.values.iter().enumerate() {
+        grid.point(flat, &mut r);
+        let mut x = vec![0.0; n_in];
+        for i in 0..system.n_state() {
+            x[1 + i] = (r[i] - input.center[1 + i]) / input.half_range[1 + i];
+        }
+        let mut features: Vec<f64> = hidden.apply(&x).iter().map(|z| z.sin()).collect();
+        features.push(1.0);
+        rows.push(features);
+        targets.push(v);
+        // The sublevel sets that matter weigh most.
+        weights.push(if v < 3.0 * v_min { 1.0 } else { 0.05 });
+    }
+    let m = FEATURES + 1;
+    let a = DMatrix::from_fn(rows.len(), m, |i, j| rows[i][j] * weights[i]);
+    let y = DVector::from_iterator(targets.len(), targets.iter().zip(&weights).map(|(t, w)| t * w));
+    let normal = a.transpose() * &a + DMatrix::identity(m, m) * 1e-8;
+    let coefficients = normal.cholesky().expect("normal equations are positive definite").solve(&(a.transpose() * y));
+    let out = Dense {
+        n_in: FEATURES,
+        n_out: 1,
+        weight: coefficients.iter().take(FEATURES).copied().collect(),
+        bias: vec![coefficients[FEATURES]],
+    };
+    ValueNetwork {
+        omega_0: 1.0,
+        layers: vec![hidden, out],
+        input,
+        output_scale: scale,
+        output_offset: 0.0,
+        exact_boundary: false,
+        periodic: vec![None; system.n_state()],
+        error_coords: system.error_coords.clone(),
+    }
+}
+
+/// A bundle of `network` whose table has `level_at_beta_u` at `beta_u` (rows below scaled by `beta^2`).
+fn write_bundle(
+    root: &std::path::Path,
+    system: &AffineSystem,
+    network: &ValueNetwork,
+    level_at_beta_u: f64,
+) -> std::path::PathBuf {
+    let onnx = write_value_graph(network, system, HORIZON);
+    let (state, planner_to_state, params, controls) = Manifest::describe_system(system);
+    let (beta_l, beta_u) = (system.params[0].min, system.params[0].max);
+    let teb_table = (0..MIN_TEB_ROWS)
+        .map(|i| {
+            let beta = beta_l + (beta_u - beta_l) * i as f64 / (MIN_TEB_ROWS - 1) as f64;
+            let level = level_at_beta_u * (beta / beta_u).powi(2);
+            TebRow { beta, level, measured_min: level, extent: vec![level], boundary_radii: vec![], verification: None }
+        })
+        .collect();
+    let manifest = Manifest {
+        schema_version: SCHEMA_VERSION,
+        name: "di-test".into(),
+        version: 1,
+        system: SystemInfo { id: system.id.into(), description: system.description.into() },
+        state,
+        planner_to_state,
+        params,
+        controls,
+        horizon: HORIZON,
+        network: NetworkInfo { kind: "siren".into(), hidden: vec![FEATURES], omega_0: 1.0, exact_boundary: false },
+        teb_table,
+        untrained: false,
+        provenance: Provenance {
+            method: "least-squares fit to the grid solution (test)".into(),
+            config: serde_json::json!({}),
+            iterations: 0,
+            final_losses: Default::default(),
+            wall_time_s: 0.0,
+            machine: String::new(),
+            source_revision: String::new(),
+            created: String::new(),
+        },
+        onnx_sha256: String::new(),
+    };
+    Bundle::write(root, manifest, &onnx).unwrap()
+}
+
+/// Verifies the `beta_u` row of a bundle of the fitted network scaled by `scale`, level `level`.
+fn verify(scale: f64, level: f64) -> fastrack_grid::verify::RowReport {
+    let (system, solution) = ground_truth();
+    let network = fitted_network(system, solution, scale);
+    let root = tempfile::tempdir().unwrap();
+    let dir = write_bundle(root.path(), system, &network, level);
+    let bundle = Bundle::load(&dir).unwrap();
+    let dims = GraphDims { n_state: 2, n_params: 1, n_control: 1 };
+    let evaluator = Evaluator::new(runtime(None).unwrap(), &bundle.onnx, dims, 1).unwrap();
+    let mut manifest = bundle.manifest.clone();
+    let options = VerifyOptions {
+        eps: 0.1,
+        delta: 0.01,
+        level_margin: 0.0,
+        horizon: 8.0,
+        step: 0.01,
+        ..VerifyOptions::default()
+    };
+    let beta_u = system.params[0].max;
+    let reports =
+        verify_table(&evaluator, &mut manifest, system, Some(&[beta_u]), &options, &ProgressBar::hidden()).unwrap();
+    // The verification lands in the manifest and survives a rewrite of the bundle.
+    let out = tempfile::tempdir().unwrap();
+    let written = Bundle::load(&Bundle::write(out.path(), manifest, &bundle.onnx).unwrap()).unwrap();
+    let row = written.manifest.teb_table.last().unwrap();
+    assert_eq!(row.verification.as_ref(), Some(&reports[0].verification));
+    assert_eq!(reports[0].verification.samples, required_samples(0.1, 0.01));
+    reports[0].clone()
+}
+
+/// Level of the correct table, as a multiple of the grid's `V_min`.
+const LEVEL_FACTOR: f64 = 2.0;
+/// Scale of the shrunk model and table.
+const SHRINK: f64 = 0.6;
+
+fn grid_v_min() -> f64 {
+    ground_truth().1.values.iter().copied().fold(f64::INFINITY, f64::min)
+}
+
+#[test]
+fn a_correct_table_reports_no_violations() {
+    let level = LEVEL_FACTOR * grid_v_min();
+    let report = verify(1.0, level);
+    let v = &report.verification;
+    eprintln!("correct table: level {level:.4}, verified {:.4}, {} of {} violations, worst-case {:.4}, random {:.4}, acceptance {:.4}",
+        v.verified_level, v.violations, v.samples, report.worst_case_max, report.random_max, report.acceptance);
+    assert_eq!(v.violations, 0, "a correct table must not be broken (verified level {} vs {level})", v.verified_level);
+    assert!(v.verified_level <= level);
+    // The rollouts did push the error out towards the level: the check has teeth.
+    assert!(v.verified_level > 0.9 * level, "rollouts reached only {} of level {level}", v.verified_level);
+}
+
+#[test]
+fn a_shrunk_table_reports_violations_and_raises_the_level() {
+    let correct_level = LEVEL_FACTOR * grid_v_min();
+    let level = SHRINK * correct_level;
+    let report = verify(SHRINK, level);
+    let v = &report.verification;
+    eprintln!(
+        "shrunk table: level {level:.4}, verified {:.4}, {} of {} violations",
+        v.verified_level, v.violations, v.samples
+    );
+    assert!(
+        v.violations > v.samples / 2,
+        "only {} of {} samples broke a table shrunk by {SHRINK}",
+        v.violations,
+        v.samples
+    );
+    assert!(
+        v.verified_level > 1.3 * level,
+        "verified level {} barely above the shrunk level {level}",
+        v.verified_level
+    );
+    assert!(
+        v.verified_level <= correct_level,
+        "verified level {} above the correct level {correct_level}",
+        v.verified_level
+    );
+}
