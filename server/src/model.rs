@@ -46,25 +46,6 @@ impl LoadedModel {
         row_for(&self.manifest.teb_table, beta)
     }
 
-    /// Relative state `r = s - Q p`, periodic coordinates wrapped.
-    pub fn relative_state(&self, tracker: &[f64], planner: &[f64]) -> Vec<f64> {
-        self.manifest
-            .state
-            .iter()
-            .zip(tracker)
-            .zip(&self.manifest.planner_to_state)
-            .map(|((dim, s), q)| {
-                let x = s - q.iter().zip(planner).map(|(a, b)| a * b).sum::<f64>();
-                if dim.periodic {
-                    let period = dim.max - dim.min;
-                    x - period * ((x - dim.min) / period).floor()
-                } else {
-                    x
-                }
-            })
-            .collect()
-    }
-
     /// Evaluates a validated batch on a blocking-pool thread.
     pub async fn evaluate(self: &Arc<Self>, batch: ValidBatch) -> Result<(BatchResult, ValidBatch), Status> {
         let model = Arc::clone(self);

@@ -27,7 +27,7 @@ pub struct ExportRequest<'a> {
     pub version: u32,
     /// Untrained (random) weights.
     pub untrained: bool,
-    /// Training provenance (machine, revision and time are filled in here).
+    /// Training provenance.
     pub provenance: Provenance,
     /// TEB search effort.
     pub teb: TebOptions,
@@ -48,10 +48,6 @@ pub fn export(root: &Path, request: ExportRequest<'_>) -> anyhow::Result<PathBuf
         tracing::warn!(beta, measured, raised_to = raised, "learned V_min not monotone in beta; level raised");
     }
     let (state, planner_to_state, params, controls) = Manifest::describe_system(system);
-    let mut provenance = request.provenance;
-    provenance.machine = fastrack_valuefn::provenance::machine_description();
-    provenance.source_revision = fastrack_valuefn::provenance::source_revision();
-    provenance.created = fastrack_valuefn::provenance::utc_now_rfc3339();
     let manifest = Manifest {
         schema_version: SCHEMA_VERSION,
         name: request.name.into(),
@@ -70,7 +66,7 @@ pub fn export(root: &Path, request: ExportRequest<'_>) -> anyhow::Result<PathBuf
         },
         teb_table: report.rows,
         untrained: request.untrained,
-        provenance,
+        provenance: request.provenance,
         onnx_sha256: String::new(),
     };
     let dir = Bundle::write(root, manifest, &onnx)?;

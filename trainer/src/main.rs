@@ -123,16 +123,13 @@ fn main() -> anyhow::Result<()> {
                 "system": system.id, "hidden": hidden, "omega_0": 30.0, "seed": seed, "horizon": horizon,
                 "exact_boundary": true, "output_offset": output_offset,
             });
-            let provenance = Provenance {
-                method: "random-init (SIREN initialisation, untrained)".into(),
+            let provenance = Provenance::here_and_now(
+                "random-init (SIREN initialisation, untrained)",
                 config,
-                iterations: 0,
-                final_losses: BTreeMap::new(),
-                wall_time_s: 0.0,
-                machine: String::new(),
-                source_revision: String::new(),
-                created: String::new(),
-            };
+                0,
+                BTreeMap::new(),
+                0.0,
+            );
             let request = export::ExportRequest {
                 network: &network,
                 system: &system,
@@ -178,23 +175,20 @@ fn main() -> anyhow::Result<()> {
             let (network, state) = checkpoint_network(&run, &burn::tensor::Device::flex())?;
             let system = state.config.system()?;
             let losses = state.last_losses.unwrap_or_default();
-            let provenance = Provenance {
-                method: format!(
+            let provenance = Provenance::here_and_now(
+                format!(
                     "DeepReach ({:?} loss, {:?} parameters), burn",
                     state.config.loss.form, state.config.parameter_mode
                 ),
-                config: serde_json::to_value(&state.config)?,
-                iterations: state.iteration,
-                final_losses: BTreeMap::from([
+                serde_json::to_value(&state.config)?,
+                state.iteration,
+                BTreeMap::from([
                     ("total".into(), losses[0]),
                     ("boundary".into(), losses[1]),
                     ("residual".into(), losses[2]),
                 ]),
-                wall_time_s: state.wall_time_s,
-                machine: String::new(),
-                source_revision: String::new(),
-                created: String::new(),
-            };
+                state.wall_time_s,
+            );
             let request = export::ExportRequest {
                 network: &network,
                 system: &system,

@@ -171,6 +171,28 @@ pub struct Provenance {
     pub created: String,
 }
 
+impl Provenance {
+    /// Provenance of a model made now, on this machine, from this source revision.
+    pub fn here_and_now(
+        method: impl Into<String>,
+        config: serde_json::Value,
+        iterations: u64,
+        final_losses: BTreeMap<String, f64>,
+        wall_time_s: f64,
+    ) -> Self {
+        Self {
+            method: method.into(),
+            config,
+            iterations,
+            final_losses,
+            wall_time_s,
+            machine: crate::provenance::machine_description(),
+            source_revision: crate::provenance::source_revision(),
+            created: crate::provenance::utc_now_rfc3339(),
+        }
+    }
+}
+
 /// Directions of [`TebRow::boundary_radii`] for an error space of `n_error` dimensions: `±1` in 1-D,
 /// `count` equally spaced angles from 0 (counter-clockwise) in 2-D, none otherwise.
 pub fn boundary_directions(n_error: usize, count: usize) -> Vec<Vec<f64>> {
@@ -244,6 +266,23 @@ impl Manifest {
     /// Number of planner state coordinates.
     pub fn planner_dim(&self) -> usize {
         self.planner_to_state.first().map_or(0, Vec::len)
+    }
+
+    /// Relative state `r = s - Q p` of tracker state `s` and planner state `p`, periodic coordinates wrapped.
+    pub fn relative_state(&self, tracker: &[f64], planner: &[f64]) -> Vec<f64> {
+        self.state
+            .iter()
+            .zip(tracker)
+            .zip(&self.planner_to_state)
+            .map(|((dim, s), q)| {
+                let x = s - q.iter().zip(planner).map(|(a, b)| a * b).sum::<f64>();
+                if dim.periodic {
+                    crate::system::wrap_periodic(x, dim.min, dim.max)
+                } else {
+                    x
+                }
+            })
+            .collect()
     }
 
     /// Indices of the error coordinates.

@@ -158,7 +158,7 @@ impl ValueNetwork {
         let mut raw = Vec::with_capacity(1 + state.len() + params.len());
         raw.push(tau);
         raw.extend(state.iter().zip(&self.periodic).map(|(&x, p)| match p {
-            Some((min, period)) => x - period * ((x - min) / period).floor(),
+            Some((min, period)) => crate::system::wrap_periodic(x, *min, min + period),
             None => x,
         }));
         raw.extend_from_slice(params);

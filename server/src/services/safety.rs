@@ -1,9 +1,10 @@
 //! `SafetyService`: planner speed, tracking error bounds, value and tracking control (unary), plus the
 //! `Track` stream (see [`super::track`]).
 
+use crate::model::BatchResult;
 use crate::repository::Repository;
 use crate::teb::query_planner_control;
-use crate::validate::{self, MAX_BOUNDARY_POINTS};
+use crate::validate::{self, ValidBatch, MAX_BOUNDARY_POINTS};
 use fastrack_proto::v1 as pb;
 use fastrack_valuefn::manifest::{boundary_directions, TebRow};
 use pb::safety_service_server::SafetyService;
@@ -45,6 +46,27 @@ fn boundary_points(row: &TebRow, n_error: usize, count: usize) -> Result<Vec<f64
                 .collect()
         }
     })
+}
+
+impl Safety {
+    /// Resolves the model, validates the batch and evaluates it: the shared path of EvaluateValue and
+    /// TrackingControl.
+    async fn evaluate(
+        &self,
+        model: Option<&pb::ModelRef>,
+        states: &[f64],
+        params: &[f64],
+        policy: pb::OutOfDomainPolicy,
+    ) -> Result<(u32, BatchResult, ValidBatch), Status> {
+        let model = self.repository.resolve(model)?;
+        let batch = validate::batch(&model, states, params, policy)?;
+        let (result, batch) = model.evaluate(batch).await?;
+        Ok((model.manifest.version, result, batch))
+    }
+}
+
+fn widen(v: &[f32]) -> Vec<f64> {
+    v.iter().map(|&x| f64::from(x)).collect()
 }
 
 #[tonic::async_trait]
@@ -105,17 +127,15 @@ impl SafetyService for Safety {
         request: Request<pb::EvaluateValueRequest>,
     ) -> Result<Response<pb::EvaluateValueResponse>, Status> {
         let req = request.into_inner();
-        let model = self.repository.resolve(req.model.as_ref())?;
-        let batch = validate::batch(&model, &req.states, &req.params, req.out_of_domain())?;
-        let (result, batch) = model.evaluate(batch).await?;
-        let widen = |v: &[f32]| v.iter().map(|&x| f64::from(x)).collect();
+        let (model_version, result, batch) =
+            self.evaluate(req.model.as_ref(), &req.states, &req.params, req.out_of_domain()).await?;
         Ok(Response::new(pb::EvaluateValueResponse {
             values: widen(&result.outputs.value),
             gradients: widen(&result.outputs.grad),
             controls: widen(&result.outputs.control),
             in_teb: result.in_teb,
             in_domain: batch.in_domain,
-            model_version: model.manifest.version,
+            model_version,
         }))
     }
 
@@ -124,16 +144,14 @@ impl SafetyService for Safety {
         request: Request<pb::TrackingControlRequest>,
     ) -> Result<Response<pb::TrackingControlResponse>, Status> {
         let req = request.into_inner();
-        let model = self.repository.resolve(req.model.as_ref())?;
-        let batch = validate::batch(&model, &req.states, &req.params, req.out_of_domain())?;
-        let (result, batch) = model.evaluate(batch).await?;
-        let widen = |v: &[f32]| v.iter().map(|&x| f64::from(x)).collect();
+        let (model_version, result, batch) =
+            self.evaluate(req.model.as_ref(), &req.states, &req.params, req.out_of_domain()).await?;
         Ok(Response::new(pb::TrackingControlResponse {
             controls: widen(&result.outputs.control),
             values: widen(&result.outputs.value),
             in_teb: result.in_teb,
             in_domain: batch.in_domain,
-            model_version: model.manifest.version,
+            model_version,
         }))
     }
 

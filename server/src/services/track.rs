@@ -101,7 +101,7 @@ async fn evaluate_tick(model: &Arc<LoadedModel>, tick: pb::TrackTick, beta_old: 
     validate::tick(model, &tick.tracker_state, &tick.planner_state)?;
     let d_obs = validate::d_obs(tick.d_obs)?;
     let speed = query_planner_control(&model.manifest.teb_table, d_obs);
-    let relative = model.relative_state(&tick.tracker_state, &tick.planner_state);
+    let relative = model.manifest.relative_state(&tick.tracker_state, &tick.planner_state);
     let params = vec![speed.beta; model.manifest.n_params()];
     let batch = validate::batch(model, &relative, &params, pb::OutOfDomainPolicy::Flag)?;
     let (result, batch) = model.evaluate(batch).await?;

@@ -148,8 +148,7 @@ impl AffineSystem {
     pub fn wrap(&self, r: &mut [f64]) {
         for (x, dim) in r.iter_mut().zip(&self.state) {
             if dim.periodic {
-                let period = dim.max - dim.min;
-                *x -= period * ((*x - dim.min) / period).floor();
+                *x = wrap_periodic(*x, dim.min, dim.max);
             }
         }
     }
@@ -224,6 +223,12 @@ impl AffineSystem {
                 + (0..d_abs.len()).map(|j| self.g_disturbance[(i, j)].abs() * d_abs[j]).sum::<f64>();
         }
     }
+}
+
+/// `x` wrapped into the period `[min, max)`.
+pub fn wrap_periodic(x: f64, min: f64, max: f64) -> f64 {
+    let period = max - min;
+    x - period * ((x - min) / period).floor()
 }
 
 /// Every system the project defines, by id.
