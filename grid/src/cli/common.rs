@@ -100,7 +100,7 @@ pub fn params_for(system: &AffineSystem, beta: f64) -> anyhow::Result<Vec<f64>> 
     Ok(vec![beta; system.n_params()])
 }
 
-/// The command line as run, for records.
+/// The command line as run, for records (`fastrack-grid <arguments>`, whatever the binary's path).
 pub fn command_line() -> String {
-    std::env::args().collect::<Vec<_>>().join(" ")
+    std::iter::once("fastrack-grid".to_string()).chain(std::env::args().skip(1)).collect::<Vec<_>>().join(" ")
 }
