@@ -1,13 +1,12 @@
-//! PNG figures (plotters, bitmap backend): line charts and side-by-side value-function slices.
+//! PNG figures (plotters, bitmap backend): side-by-side value-function slices. Line charts come from
+//! `fastrack_valuefn::plot`, which also registers the label font.
 //!
 //! Text needs a font: plotters' pure-Rust `ab_glyph` renderer is given DejaVu Sans (or Liberation Sans)
 //! from the system font folders when one is installed; without one, figures are drawn without text (axes,
 //! lines and colours only) and the numbers live in the markdown records beside them.
 
 use plotters::prelude::*;
-use plotters::style::FontStyle;
 use std::path::Path;
-use std::sync::OnceLock;
 
 /// A figure could not be drawn or written.
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
@@ -19,93 +18,8 @@ pub struct PlotError {
     pub problem: String,
 }
 
-/// Font files tried, in order.
-const FONT_FILES: &[&str] = &[
-    "/usr/share/fonts/truetype/dejavu/DejaVuSans.ttf",
-    "/usr/share/fonts/dejavu/DejaVuSans.ttf",
-    "/usr/share/fonts/truetype/liberation/LiberationSans-Regular.ttf",
-];
-
-/// Registers a system font for `sans-serif` once; true if text can be drawn.
-fn text_available() -> bool {
-    static AVAILABLE: OnceLock<bool> = OnceLock::new();
-    *AVAILABLE.get_or_init(|| {
-        FONT_FILES.iter().any(|path| match std::fs::read(path) {
-            Ok(bytes) => plotters::style::register_font("sans-serif", FontStyle::Normal, bytes.leak()).is_ok(),
-            Err(_) => false,
-        })
-    })
-}
-
-/// One line of a chart.
-#[derive(Debug, Clone, PartialEq)]
-pub struct Series {
-    /// Legend entry.
-    pub label: String,
-    /// `(x, y)` points.
-    pub points: Vec<(f64, f64)>,
-}
-
-const COLORS: [RGBColor; 6] = [
-    RGBColor(31, 119, 180),
-    RGBColor(255, 127, 14),
-    RGBColor(44, 160, 44),
-    RGBColor(214, 39, 40),
-    RGBColor(148, 103, 189),
-    RGBColor(140, 86, 75),
-];
-
 fn fail(path: &Path, e: impl std::fmt::Display) -> PlotError {
     PlotError { path: path.display().to_string(), problem: e.to_string() }
-}
-
-fn padded(lo: f64, hi: f64) -> std::ops::Range<f64> {
-    let pad = if hi > lo { 0.05 * (hi - lo) } else { 0.5 * lo.abs().max(1.0) };
-    (lo - pad)..(hi + pad)
-}
-
-/// A line chart of `series` with a title and axis labels (text only when a font is available).
-pub fn line_chart(path: &Path, title: &str, x_label: &str, y_label: &str, series: &[Series]) -> Result<(), PlotError> {
-    let text = text_available();
-    let all = series.iter().flat_map(|s| s.points.iter());
-    let (x0, x1, y0, y1) = all.fold((f64::INFINITY, f64::NEG_INFINITY, f64::INFINITY, f64::NEG_INFINITY), |a, p| {
-        (a.0.min(p.0), a.1.max(p.0), a.2.min(p.1), a.3.max(p.1))
-    });
-    if !(x0.is_finite() && y0.is_finite()) {
-        return Err(fail(path, "no finite points to draw"));
-    }
-    let root = BitMapBackend::new(path, (900, 600)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| fail(path, e))?;
-    let mut builder = ChartBuilder::on(&root);
-    builder.margin(20);
-    if text {
-        builder.caption(title, ("sans-serif", 22)).x_label_area_size(45).y_label_area_size(70);
-    }
-    let mut chart = builder.build_cartesian_2d(padded(x0, x1), padded(y0, y1)).map_err(|e| fail(path, e))?;
-    if text {
-        chart.configure_mesh().x_desc(x_label).y_desc(y_label).draw().map_err(|e| fail(path, e))?;
-    } else {
-        chart.configure_mesh().x_labels(0).y_labels(0).draw().map_err(|e| fail(path, e))?;
-    }
-    for (k, s) in series.iter().enumerate() {
-        let color = COLORS[k % COLORS.len()];
-        chart.draw_series(s.points.iter().map(|&p| Circle::new(p, 3, color.filled()))).map_err(|e| fail(path, e))?;
-        let drawn = chart
-            .draw_series(LineSeries::new(s.points.iter().copied(), color.stroke_width(2)))
-            .map_err(|e| fail(path, e))?;
-        if text {
-            drawn.label(s.label.clone()).legend(move |(x, y)| PathElement::new(vec![(x, y), (x + 20, y)], color));
-        }
-    }
-    if text {
-        chart
-            .configure_series_labels()
-            .background_style(WHITE.mix(0.8))
-            .border_style(BLACK)
-            .draw()
-            .map_err(|e| fail(path, e))?;
-    }
-    root.present().map_err(|e| fail(path, e))
 }
 
 /// Blue (low) to yellow (high).
@@ -124,7 +38,7 @@ pub fn slice_pair(
     n1: usize,
     level: f64,
 ) -> Result<(), PlotError> {
-    let text = text_available();
+    let text = fastrack_valuefn::plot::fonts_available();
     let (lo, hi) = panels
         .iter()
         .flat_map(|(_, v)| v.iter())

@@ -13,7 +13,8 @@ const FONT_CANDIDATES: &[&str] = &[
     "/usr/share/fonts/TTF/DejaVuSans.ttf",
 ];
 
-fn fonts_available() -> bool {
+/// Registers DejaVu Sans for `sans-serif` once; true if text can be drawn.
+pub fn fonts_available() -> bool {
     static REGISTERED: OnceLock<bool> = OnceLock::new();
     *REGISTERED.get_or_init(|| {
         FONT_CANDIDATES.iter().find_map(|p| std::fs::read(p).ok()).is_some_and(|bytes| {

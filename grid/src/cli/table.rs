@@ -5,9 +5,9 @@ use super::common::{command_line, params_for, SolveOptions};
 use anyhow::Context;
 use fastrack_grid::analysis::{teb, Teb, EXTENT_REL_TOL};
 use fastrack_grid::format::{load, save};
-use fastrack_grid::plot::{line_chart, Series};
 use fastrack_grid::solver::{solve, Solution};
 use fastrack_grid::upwind::Accuracy;
+use fastrack_valuefn::plot::{line_chart, Chart, Series};
 use fastrack_valuefn::record::{write_record, Table};
 use fastrack_valuefn::system::AffineSystem;
 use serde_json::json;
@@ -208,16 +208,13 @@ fn write_outputs(
         .map(|e| Series {
             label: format!("beta {} ({})", e.beta, res_label(e)),
             points: e.solution.info.history.iter().map(|h| (h.tau, h.v_min)).collect(),
+            markers: false,
         })
         .collect();
     let horizon_png = dir.join(format!("{name}-vmin-vs-horizon.png"));
-    line_chart(
-        &horizon_png,
-        &format!("{}: V_min vs horizon", system.id),
-        "horizon tau (s)",
-        "V_min (m)",
-        &horizon_series,
-    )?;
+    let title = format!("{}: V_min vs horizon", system.id);
+    let chart = Chart { title: &title, x_label: "horizon tau (s)", y_label: "V_min (m)", log_y: false };
+    line_chart(&horizon_png, &chart, &horizon_series).map_err(anyhow::Error::msg)?;
     // V_min against resolution, one line per (accuracy, beta).
     let mut resolution_series = Vec::new();
     for &accuracy in accuracies {
@@ -229,20 +226,16 @@ fn write_outputs(
                 .collect();
             points.sort_by(|a, b| a.0.total_cmp(&b.0));
             if points.len() > 1 {
-                resolution_series.push(Series { label: format!("{accuracy} beta {beta}"), points });
+                resolution_series.push(Series { label: format!("{accuracy} beta {beta}"), points, markers: false });
             }
         }
     }
     let mut plots = vec![horizon_png.display().to_string()];
     if !resolution_series.is_empty() {
         let png = dir.join(format!("{name}-vmin-vs-resolution.png"));
-        line_chart(
-            &png,
-            &format!("{}: V_min vs nodes per axis", system.id),
-            "nodes per axis",
-            "V_min (m)",
-            &resolution_series,
-        )?;
+        let title = format!("{}: V_min vs nodes per axis", system.id);
+        let chart = Chart { title: &title, x_label: "nodes per axis", y_label: "V_min (m)", log_y: false };
+        line_chart(&png, &chart, &resolution_series).map_err(anyhow::Error::msg)?;
         plots.push(png.display().to_string());
     }
     let figures = json!({
