@@ -11,27 +11,104 @@
 
 pub use fastrack_proto::v1 as pb;
 
+pub mod load;
+
 use pb::model_admin_service_client::ModelAdminServiceClient;
 use pb::model_service_client::ModelServiceClient;
 use pb::safety_service_client::SafetyServiceClient;
+use rustls_pki_types::pem::PemObject;
+use rustls_pki_types::{CertificateDer, PrivateKeyDer};
 use std::time::Duration;
 use tokio_stream::wrappers::ReceiverStream;
-use tonic::transport::{Channel, Endpoint};
+use tonic::metadata::AsciiMetadataValue;
+use tonic::transport::{Certificate, Channel, ClientTlsConfig, Endpoint, Identity};
 pub use tonic_health::pb::health_check_response::ServingStatus as HealthStatus;
 use tonic_health::pb::health_client::HealthClient;
 
 /// Connection settings.
-#[derive(Debug, Clone, Copy, PartialEq)]
+#[derive(Clone, PartialEq, Eq)]
 pub struct ClientOptions {
     /// Limit on establishing the connection.
     pub connect_timeout: Duration,
     /// Deadline of each unary call (sent to the server as `grpc-timeout`).
     pub request_timeout: Duration,
+    /// Bearer token sent as `authorization: Bearer <token>` on every call (unary and streams).
+    pub bearer_token: Option<String>,
+    /// TLS settings; `Some` requires an `https://` endpoint.
+    pub tls: Option<ClientTls>,
 }
 
 impl Default for ClientOptions {
     fn default() -> Self {
-        Self { connect_timeout: Duration::from_secs(5), request_timeout: Duration::from_secs(5) }
+        Self {
+            connect_timeout: Duration::from_secs(5),
+            request_timeout: Duration::from_secs(5),
+            bearer_token: None,
+            tls: None,
+        }
+    }
+}
+
+impl std::fmt::Debug for ClientOptions {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ClientOptions")
+            .field("connect_timeout", &self.connect_timeout)
+            .field("request_timeout", &self.request_timeout)
+            .field("bearer_token", &self.bearer_token.as_ref().map(|_| "<redacted>"))
+            .field("tls", &self.tls)
+            .finish()
+    }
+}
+
+/// TLS settings of a connection: the server is verified against `ca_pem`; with `identity` the client also
+/// presents a certificate (mutual TLS).
+#[derive(Clone, PartialEq, Eq)]
+pub struct ClientTls {
+    /// PEM of the certificate authority (one or more certificates) that signed the server's certificate.
+    pub ca_pem: Vec<u8>,
+    /// Client certificate chain PEM and private key PEM, for mutual TLS.
+    pub identity: Option<(Vec<u8>, Vec<u8>)>,
+    /// Server name to verify the certificate against; default: the endpoint's host.
+    pub domain: Option<String>,
+}
+
+impl std::fmt::Debug for ClientTls {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.debug_struct("ClientTls")
+            .field("ca_pem", &format_args!("<{} bytes>", self.ca_pem.len()))
+            .field("identity", &self.identity.as_ref().map(|_| "<certificate and key>"))
+            .field("domain", &self.domain)
+            .finish()
+    }
+}
+
+impl ClientTls {
+    /// Checks that every PEM holds what it must (a certificate, a private key) and builds tonic's config.
+    fn config(&self) -> Result<ClientTlsConfig, ClientError> {
+        let bad = |what: &'static str, reason: String| ClientError::Tls { what, reason };
+        let certificates = |what: &'static str, pem: &[u8]| -> Result<(), ClientError> {
+            let mut count = 0usize;
+            for certificate in CertificateDer::pem_slice_iter(pem) {
+                certificate.map_err(|e| bad(what, e.to_string()))?;
+                count += 1;
+            }
+            if count == 0 {
+                return Err(bad(what, "no PEM certificate (-----BEGIN CERTIFICATE-----) found".into()));
+            }
+            Ok(())
+        };
+        certificates("CA certificate", &self.ca_pem)?;
+        let mut config = ClientTlsConfig::new().ca_certificate(Certificate::from_pem(&self.ca_pem));
+        if let Some((cert, key)) = &self.identity {
+            certificates("client certificate", cert)?;
+            PrivateKeyDer::from_pem_slice(key)
+                .map_err(|e| bad("client key", format!("no usable PEM private key (PKCS#8, PKCS#1 or SEC1): {e}")))?;
+            config = config.identity(Identity::from_pem(cert, key));
+        }
+        if let Some(domain) = &self.domain {
+            config = config.domain_name(domain.clone());
+        }
+        Ok(config)
     }
 }
 
@@ -54,12 +131,34 @@ pub enum ClientError {
         /// The transport error.
         source: tonic::transport::Error,
     },
-    /// The server answered with an error status.
-    #[error("{:?}: {}", .0.code(), .0.message())]
+    /// The server answered with an error status (or the transport failed during the call).
+    #[error("{}", status_text(.0))]
     Status(tonic::Status),
     /// The server did not become ready in time.
     #[error("server not SERVING after {0:?}")]
     NotReady(Duration),
+    /// A TLS setting is unusable (e.g. a PEM file without a certificate or key).
+    #[error("TLS {what}: {reason}")]
+    Tls {
+        /// Which setting: "CA certificate", "client certificate", "client key" or "configuration".
+        what: &'static str,
+        /// What is wrong with it.
+        reason: String,
+    },
+    /// A load run cannot start: bad spec, or a model description it cannot draw inputs from.
+    #[error("load run: {0}")]
+    InvalidLoad(String),
+    /// The in-process evaluation of a bundle failed (bundle, ONNX Runtime library or inference).
+    #[error("in-process evaluation of {}: {reason}", bundle.display())]
+    InProcess {
+        /// The bundle's version folder.
+        bundle: std::path::PathBuf,
+        /// What went wrong.
+        reason: String,
+    },
+    /// The bearer token cannot be sent as gRPC metadata.
+    #[error("bearer token is not a valid header value (printable ASCII only, no line breaks)")]
+    InvalidToken,
 }
 
 impl From<tonic::Status> for ClientError {
@@ -78,6 +177,26 @@ impl ClientError {
     }
 }
 
+/// `Code: message`, with the causes of transport failures (e.g. a refused client certificate) appended.
+fn status_text(status: &tonic::Status) -> String {
+    let mut text = format!("{:?}: {}", status.code(), status.message());
+    if let Some(source) = std::error::Error::source(status) {
+        text += &format!(" ({})", error_chain(source));
+    }
+    text
+}
+
+/// An error and its sources, `: `-separated (tonic's transport errors hide the useful part in the sources).
+fn error_chain(error: &dyn std::error::Error) -> String {
+    let mut text = error.to_string();
+    let mut source = error.source();
+    while let Some(cause) = source {
+        text += &format!(": {cause}");
+        source = cause.source();
+    }
+    text
+}
+
 /// `ModelRef` for `name` at `version` (0 = latest).
 pub fn model_ref(name: &str, version: u32) -> pb::ModelRef {
     pb::ModelRef { name: name.into(), version }
@@ -88,29 +207,60 @@ pub fn model_ref(name: &str, version: u32) -> pb::ModelRef {
 pub struct FastrackClient {
     channel: Channel,
     request_timeout: Duration,
+    /// `Bearer <token>`, sent as `authorization` on every call.
+    authorization: Option<AsciiMetadataValue>,
 }
 
 impl FastrackClient {
-    /// Connects to `endpoint` (e.g. `http://127.0.0.1:50051`).
+    /// Connects to `endpoint` (e.g. `http://127.0.0.1:50051`, or `https://...` with `options.tls`).
     pub async fn connect(endpoint: &str, options: ClientOptions) -> Result<Self, ClientError> {
         let invalid = |reason: String| ClientError::InvalidEndpoint { endpoint: endpoint.into(), reason };
-        let channel = Endpoint::from_shared(endpoint.to_string())
+        let authorization = options
+            .bearer_token
+            .as_ref()
+            .map(|token| format!("Bearer {token}").parse::<AsciiMetadataValue>().map_err(|_| ClientError::InvalidToken))
+            .transpose()?;
+        let mut builder = Endpoint::from_shared(endpoint.to_string())
             .map_err(|e| invalid(e.to_string()))?
             .connect_timeout(options.connect_timeout)
-            .tcp_nodelay(true)
-            .connect()
-            .await
-            .map_err(|source| ClientError::Connect { endpoint: endpoint.into(), source })?;
-        Ok(Self { channel, request_timeout: options.request_timeout })
+            .tcp_nodelay(true);
+        let https = builder.uri().scheme_str() == Some("https");
+        match &options.tls {
+            Some(tls) => {
+                if !https {
+                    return Err(invalid("TLS is configured: the address must start with https://".into()));
+                }
+                builder = builder
+                    .tls_config(tls.config()?)
+                    .map_err(|e| ClientError::Tls { what: "configuration", reason: error_chain(&e) })?;
+            }
+            None if https => {
+                return Err(invalid("an https:// address needs TLS settings (a CA certificate)".into()));
+            }
+            None => {}
+        }
+        let channel =
+            builder.connect().await.map_err(|source| ClientError::Connect { endpoint: endpoint.into(), source })?;
+        Ok(Self { channel, request_timeout: options.request_timeout, authorization })
     }
 
     /// The same connection with another per-call deadline.
     pub fn with_deadline(&self, deadline: Duration) -> Self {
-        Self { channel: self.channel.clone(), request_timeout: deadline }
+        Self { channel: self.channel.clone(), request_timeout: deadline, authorization: self.authorization.clone() }
     }
 
-    fn request<T>(&self, message: T) -> tonic::Request<T> {
+    /// A request carrying the bearer token, without deadline.
+    fn authorized<T>(&self, message: T) -> tonic::Request<T> {
         let mut request = tonic::Request::new(message);
+        if let Some(value) = &self.authorization {
+            request.metadata_mut().insert("authorization", value.clone());
+        }
+        request
+    }
+
+    /// A unary request: bearer token and deadline.
+    fn request<T>(&self, message: T) -> tonic::Request<T> {
+        let mut request = self.authorized(message);
         request.set_timeout(self.request_timeout);
         request
     }
@@ -216,7 +366,7 @@ impl FastrackClient {
             msg: Some(pb::track_request::Msg::Open(pb::TrackOpen { model: Some(model), idle_timeout_s })),
         };
         tx.send(open).await.map_err(|_| tonic::Status::internal("stream closed"))?;
-        let replies = self.safety().track(ReceiverStream::new(rx)).await?.into_inner();
+        let replies = self.safety().track(self.authorized(ReceiverStream::new(rx))).await?.into_inner();
         Ok(TrackSession { ticks: tx, replies })
     }
 
@@ -265,5 +415,114 @@ impl TrackSession {
     pub async fn tick(&mut self, tick: pb::TrackTick) -> Result<pb::TrackReply, ClientError> {
         self.send(tick).await?;
         self.recv().await?.ok_or_else(|| tonic::Status::unavailable("Track stream closed by the server").into())
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use rcgen::{BasicConstraints, CertificateParams, CertifiedIssuer, IsCa, KeyPair};
+    use tonic::service::interceptor::InterceptedService;
+    use tonic::transport::server::TcpIncoming;
+    use tonic::transport::{Server, ServerTlsConfig};
+
+    /// A CA, a server certificate for "localhost" and a client certificate, all PEM.
+    struct Pki {
+        ca: String,
+        server: (String, String),
+        client: (String, String),
+    }
+
+    fn pki() -> Pki {
+        let mut ca_params = CertificateParams::new(Vec::<String>::new()).unwrap();
+        ca_params.is_ca = IsCa::Ca(BasicConstraints::Unconstrained);
+        let ca = CertifiedIssuer::self_signed(ca_params, KeyPair::generate().unwrap()).unwrap();
+        let leaf = |name: &str| {
+            let key = KeyPair::generate().unwrap();
+            let cert = CertificateParams::new(vec![name.to_string()]).unwrap().signed_by(&key, &*ca).unwrap();
+            (cert.pem(), key.serialize_pem())
+        };
+        Pki { ca: ca.pem(), server: leaf("localhost"), client: leaf("robot") }
+    }
+
+    /// A health server with TLS (mutual if `client_ca`) that requires `authorization: Bearer secret`;
+    /// returns its `https://127.0.0.1:<port>` address.
+    async fn tls_server(pki: &Pki, client_ca: bool) -> String {
+        let listener = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+        let port = listener.local_addr().unwrap().port();
+        let mut tls = ServerTlsConfig::new().identity(Identity::from_pem(&pki.server.0, &pki.server.1));
+        if client_ca {
+            tls = tls.client_ca_root(Certificate::from_pem(&pki.ca));
+        }
+        let (_, health) = tonic_health::server::health_reporter();
+        let check = |request: tonic::Request<()>| match request.metadata().get("authorization") {
+            Some(value) if value == "Bearer secret" => Ok(request),
+            _ => Err(tonic::Status::unauthenticated("missing or wrong bearer token")),
+        };
+        let router = Server::builder().tls_config(tls).unwrap().add_service(InterceptedService::new(health, check));
+        tokio::spawn(router.serve_with_incoming(TcpIncoming::from(listener)));
+        format!("https://127.0.0.1:{port}")
+    }
+
+    fn options(pki: &Pki, token: Option<&str>, identity: bool) -> ClientOptions {
+        ClientOptions {
+            bearer_token: token.map(Into::into),
+            tls: Some(ClientTls {
+                ca_pem: pki.ca.clone().into_bytes(),
+                identity: identity.then(|| (pki.client.0.clone().into_bytes(), pki.client.1.clone().into_bytes())),
+                domain: Some("localhost".into()),
+            }),
+            ..Default::default()
+        }
+    }
+
+    /// Connects and checks health; any failure (connection or status) as an error.
+    async fn health(endpoint: &str, options: ClientOptions) -> Result<HealthStatus, ClientError> {
+        FastrackClient::connect(endpoint, options).await?.health().await
+    }
+
+    #[tokio::test]
+    async fn tls_with_bearer_token() {
+        let pki = pki();
+        let endpoint = tls_server(&pki, false).await;
+        assert_eq!(health(&endpoint, options(&pki, Some("secret"), false)).await.unwrap(), HealthStatus::Serving);
+        let missing = health(&endpoint, options(&pki, None, false)).await.unwrap_err();
+        assert_eq!(missing.code(), Some(tonic::Code::Unauthenticated), "{missing}");
+        let wrong = health(&endpoint, options(&pki, Some("guess"), false)).await.unwrap_err();
+        assert_eq!(wrong.code(), Some(tonic::Code::Unauthenticated), "{wrong}");
+        // A server certificate from another CA is refused.
+        let mut other = options(&pki, Some("secret"), false);
+        other.tls.as_mut().unwrap().ca_pem = self::pki().ca.into_bytes();
+        assert!(health(&endpoint, other).await.is_err());
+    }
+
+    #[tokio::test]
+    async fn mutual_tls_needs_the_client_certificate() {
+        let pki = pki();
+        let endpoint = tls_server(&pki, true).await;
+        assert_eq!(health(&endpoint, options(&pki, Some("secret"), true)).await.unwrap(), HealthStatus::Serving);
+        assert!(health(&endpoint, options(&pki, Some("secret"), false)).await.is_err());
+    }
+
+    #[tokio::test]
+    async fn unusable_settings_are_named() {
+        let pki = pki();
+        let endpoint = "https://127.0.0.1:9";
+        let mut bad_ca = options(&pki, None, true);
+        bad_ca.tls.as_mut().unwrap().ca_pem = b"not a certificate".to_vec();
+        let error = FastrackClient::connect(endpoint, bad_ca).await.unwrap_err();
+        assert!(matches!(error, ClientError::Tls { what: "CA certificate", .. }), "{error}");
+        let mut bad_key = options(&pki, None, true);
+        bad_key.tls.as_mut().unwrap().identity.as_mut().unwrap().1 = pki.client.0.clone().into_bytes();
+        let error = FastrackClient::connect(endpoint, bad_key).await.unwrap_err();
+        assert!(matches!(error, ClientError::Tls { what: "client key", .. }), "{error}");
+        let error = FastrackClient::connect("http://127.0.0.1:9", options(&pki, None, false)).await.unwrap_err();
+        assert!(matches!(error, ClientError::InvalidEndpoint { .. }), "{error}");
+        let error = FastrackClient::connect(endpoint, ClientOptions::default()).await.unwrap_err();
+        assert!(matches!(error, ClientError::InvalidEndpoint { .. }), "{error}");
+        let token = ClientOptions { bearer_token: Some("a\nb".into()), ..Default::default() };
+        let error = FastrackClient::connect("http://127.0.0.1:9", token).await.unwrap_err();
+        assert!(matches!(error, ClientError::InvalidToken), "{error}");
+        assert!(!format!("{:?}", options(&pki, Some("secret"), true)).contains("secret"));
     }
 }

@@ -2,9 +2,12 @@
 //! or `--json` output.
 
 use anyhow::Context;
-use clap::{Parser, Subcommand};
-use fastrack_client::{model_ref, pb, ClientOptions, FastrackClient};
+use clap::{Parser, Subcommand, ValueEnum};
+use fastrack_client::load::{run_in_process, run_load, InProcessReport, InProcessSpec, LoadReport, LoadSpec, Workload};
+use fastrack_client::{model_ref, pb, ClientOptions, ClientTls, FastrackClient};
+use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::{json, Value};
+use std::path::PathBuf;
 use std::time::Duration;
 
 #[derive(Parser)]
@@ -19,6 +22,22 @@ struct Cli {
     /// Print JSON instead of text.
     #[arg(long, global = true)]
     json: bool,
+    /// Bearer token sent as `authorization: Bearer <token>` on every call.
+    #[arg(long, env = "FASTRACK_TOKEN", hide_env_values = true, global = true)]
+    token: Option<String>,
+    /// PEM file of the CA that signed the server's certificate: connect with TLS (the server address must
+    /// start with https://).
+    #[arg(long, global = true)]
+    tls_ca: Option<PathBuf>,
+    /// PEM file of the client certificate, for mutual TLS (with --tls-key).
+    #[arg(long, global = true, requires = "tls_key")]
+    tls_cert: Option<PathBuf>,
+    /// PEM file of the client certificate's private key, for mutual TLS (with --tls-cert).
+    #[arg(long, global = true, requires = "tls_cert")]
+    tls_key: Option<PathBuf>,
+    /// Server name to verify the certificate against (default: the server address's host).
+    #[arg(long, global = true)]
+    tls_domain: Option<String>,
     #[command(subcommand)]
     command: Command,
 }
@@ -78,8 +97,12 @@ enum Command {
         #[arg(long, default_value_t = 0.1)]
         dt: f64,
     },
+    /// Load generator: closed-loop clients at each concurrency, unary TrackingControl batches or Track
+    /// ticks; prints throughput and latency percentiles (and, with --in-process, the ratio to evaluating the
+    /// same bundle in this process).
+    Load(LoadArgs),
     /// Admin: loads a model from the server's repository.
-    Load {
+    LoadModel {
         /// Model name.
         name: String,
         /// Version (0 = every version on disk).
@@ -87,7 +110,7 @@ enum Command {
         version: u32,
     },
     /// Admin: stops serving a model.
-    Unload {
+    UnloadModel {
         /// Model name.
         name: String,
         /// Version (0 = every version).
@@ -95,10 +118,63 @@ enum Command {
         version: u32,
     },
     /// Admin: re-reads a model (or, without a name, the whole repository) from disk.
-    Reload {
+    ReloadModel {
         /// Model name.
         name: Option<String>,
     },
+}
+
+/// What the load generator's clients send.
+#[derive(Clone, Copy, ValueEnum)]
+enum WorkloadArg {
+    /// Unary TrackingControl calls of --batch items.
+    Unary,
+    /// Ticks on Track streams, one stream per client.
+    Track,
+}
+
+#[derive(clap::Args)]
+struct LoadArgs {
+    /// Model name.
+    #[arg(long)]
+    model: String,
+    /// Version (0 = latest).
+    #[arg(long, default_value_t = 0)]
+    version: u32,
+    /// What each client sends.
+    #[arg(long, value_enum, default_value = "unary")]
+    workload: WorkloadArg,
+    /// Items per unary request.
+    #[arg(long, default_value_t = 1, value_parser = clap::value_parser!(u32).range(1..))]
+    batch: u32,
+    /// Concurrent clients, one run per value, comma separated.
+    #[arg(long, value_delimiter = ',', default_value = "1,8,64,256", value_parser = clap::value_parser!(u32).range(1..))]
+    concurrency: Vec<u32>,
+    /// Measured seconds per run.
+    #[arg(long, default_value = "5", value_parser = seconds)]
+    duration_s: Duration,
+    /// Warm-up seconds before each run's measurement.
+    #[arg(long, default_value = "1", value_parser = seconds)]
+    warmup_s: Duration,
+    /// Seed of the random inputs.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Also evaluate this bundle folder (<repository>/<name>/<version>) in-process through ONNX Runtime, as
+    /// many threads as cores at the same batch size, and print the server's throughput relative to it.
+    #[arg(long)]
+    in_process: Option<PathBuf>,
+    /// Threads of the in-process evaluation (default: the number of cores).
+    #[arg(long, requires = "in_process", value_parser = clap::value_parser!(u32).range(1..))]
+    in_process_threads: Option<u32>,
+    /// ONNX Runtime library for --in-process (default: $FASTRACK_ORT_LIB, then .cache/onnxruntime).
+    #[arg(long, requires = "in_process")]
+    ort_lib: Option<PathBuf>,
+}
+
+/// A non-negative, finite number of seconds.
+fn seconds(text: &str) -> Result<Duration, String> {
+    let value: f64 = text.parse().map_err(|e| format!("{e}"))?;
+    Duration::try_from_secs_f64(value).map_err(|_| format!("{value} is not a finite number of seconds >= 0"))
 }
 
 #[derive(clap::Args)]
@@ -309,14 +385,31 @@ async fn scripted_track(
     Ok(())
 }
 
-#[tokio::main(flavor = "current_thread")]
+/// Connection settings from the global flags (token, TLS files).
+fn client_options(cli: &Cli) -> anyhow::Result<ClientOptions> {
+    let timeout = Duration::from_millis(cli.timeout_ms);
+    let read = |path: &PathBuf| std::fs::read(path).with_context(|| format!("reading {}", path.display()));
+    let tls = match (&cli.tls_ca, &cli.tls_cert, &cli.tls_key) {
+        (Some(ca), cert, key) => Some(ClientTls {
+            ca_pem: read(ca)?,
+            identity: match (cert, key) {
+                (Some(cert), Some(key)) => Some((read(cert)?, read(key)?)),
+                _ => None,
+            },
+            domain: cli.tls_domain.clone(),
+        }),
+        (None, None, None) if cli.tls_domain.is_none() => None,
+        (None, ..) => anyhow::bail!("--tls-cert, --tls-key and --tls-domain need --tls-ca"),
+    };
+    Ok(ClientOptions { connect_timeout: timeout, request_timeout: timeout, bearer_token: cli.token.clone(), tls })
+}
+
+#[tokio::main]
 async fn main() -> anyhow::Result<()> {
     let cli = Cli::parse();
-    let timeout = Duration::from_millis(cli.timeout_ms);
-    let client =
-        FastrackClient::connect(&cli.server, ClientOptions { connect_timeout: timeout, request_timeout: timeout })
-            .await?;
+    let options = client_options(&cli)?;
     let j = cli.json;
+    let client = FastrackClient::connect(&cli.server, options.clone()).await?;
     match cli.command {
         Command::Health => {
             let status = client.health().await?;
@@ -382,15 +475,16 @@ async fn main() -> anyhow::Result<()> {
         Command::Evaluate(args) => batch(&client, args, false, j).await?,
         Command::Control(args) => batch(&client, args, true, j).await?,
         Command::Track { name, ticks, dt } => scripted_track(&client, &name, ticks, dt, j).await?,
-        Command::Load { name, version } => {
+        Command::Load(args) => load(&cli.server, &options, args, j).await?,
+        Command::LoadModel { name, version } => {
             let v = client.load_model(&name, version).await?;
             print(j, json!({"loaded_versions": v}), || format!("{name}: loaded versions {v:?}"));
         }
-        Command::Unload { name, version } => {
+        Command::UnloadModel { name, version } => {
             let v = client.unload_model(&name, version).await?;
             print(j, json!({"unloaded_versions": v}), || format!("{name}: unloaded versions {v:?}"));
         }
-        Command::Reload { name } => {
+        Command::ReloadModel { name } => {
             let outcomes = client.reload_model(name.as_deref().unwrap_or_default()).await?;
             print(
                 j,
@@ -418,4 +512,147 @@ async fn main() -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// `fastrack load`: one run per concurrency, then the in-process ceiling if asked; a table or JSON.
+async fn load(server: &str, options: &ClientOptions, args: LoadArgs, json_mode: bool) -> anyhow::Result<()> {
+    let workload = match args.workload {
+        WorkloadArg::Unary => Workload::Unary { batch: args.batch as usize },
+        WorkloadArg::Track => Workload::Track,
+    };
+    let style = ProgressStyle::with_template("{prefix:>16} [{bar:30}] {msg}")?.progress_chars("=> ");
+    let mut reports = Vec::with_capacity(args.concurrency.len());
+    for &concurrency in &args.concurrency {
+        let spec = LoadSpec {
+            model: model_ref(&args.model, args.version),
+            workload,
+            concurrency: concurrency as usize,
+            duration: args.duration_s,
+            warmup: args.warmup_s,
+            seed: args.seed,
+        };
+        let bar = ProgressBar::new(0).with_style(style.clone()).with_prefix(format!("concurrency {concurrency}"));
+        reports.push(run_load(server, options, &spec, Some(bar)).await?);
+    }
+    let ceiling = match args.in_process {
+        Some(bundle_dir) => {
+            let threads = match args.in_process_threads {
+                Some(t) => t as usize,
+                None => std::thread::available_parallelism().map_or(1, |n| n.get()),
+            };
+            let spec = InProcessSpec {
+                bundle_dir,
+                batch: workload.items_per_request(),
+                threads,
+                duration: args.duration_s,
+                warmup: args.warmup_s,
+                ort_lib: args.ort_lib,
+                seed: args.seed,
+            };
+            let spinner =
+                ProgressBar::new_spinner().with_message(format!("in-process: {threads} threads, batch {}", spec.batch));
+            spinner.enable_steady_tick(Duration::from_millis(100));
+            let report = tokio::task::spawn_blocking(move || run_in_process(&spec))
+                .await
+                .context("the in-process evaluation thread failed")??;
+            spinner.finish_and_clear();
+            Some(report)
+        }
+        None => None,
+    };
+    let ratio = |r: &LoadReport| ceiling.as_ref().map(|c| r.items_per_s() / c.items_per_s());
+    let title = format!(
+        "{} (version {}), {workload}, {:?} per run after {:?} warm-up",
+        args.model,
+        if args.version == 0 { "default".to_string() } else { args.version.to_string() },
+        args.duration_s,
+        args.warmup_s
+    );
+    print(
+        json_mode,
+        json!({
+            "server": server, "model": args.model, "version": args.version, "workload": workload.to_string(),
+            "runs": reports.iter().map(|r| {
+                let mut row = r.to_json();
+                row["vs_in_process"] = json!(ratio(r));
+                row
+            }).collect::<Vec<_>>(),
+            "in_process": ceiling.as_ref().map(InProcessReport::to_json),
+        }),
+        || {
+            let mut header = vec![
+                "concurrency",
+                "connections",
+                "requests",
+                "requests/s",
+                "items/s",
+                "p50 ms",
+                "p90 ms",
+                "p99 ms",
+                "max ms",
+                "errors",
+            ];
+            if ceiling.is_some() {
+                header.push("vs in-process");
+            }
+            let ms = |d: Duration| format!("{:.2}", d.as_secs_f64() * 1e3);
+            let rows: Vec<Vec<String>> = reports
+                .iter()
+                .map(|r| {
+                    let mut row = vec![
+                        r.concurrency.to_string(),
+                        r.connections.to_string(),
+                        r.requests.to_string(),
+                        format!("{:.0}", r.requests_per_s()),
+                        format!("{:.0}", r.items_per_s()),
+                        ms(r.latency.p50),
+                        ms(r.latency.p90),
+                        ms(r.latency.p99),
+                        ms(r.latency.max),
+                        errors_text(r),
+                    ];
+                    if let Some(x) = ratio(r) {
+                        row.push(format!("{x:.3}"));
+                    }
+                    row
+                })
+                .collect();
+            let mut text = format!("{title}\n{}", aligned(&header, &rows));
+            if let Some(c) = &ceiling {
+                text += &format!(
+                    "\nin-process ceiling: {:.0} items/s ({} threads, batch {}, {} evaluations)",
+                    c.items_per_s(),
+                    c.threads,
+                    c.batch,
+                    c.evaluations
+                );
+            }
+            text
+        },
+    );
+    Ok(())
+}
+
+/// "0", or the total and the count per gRPC code.
+fn errors_text(report: &LoadReport) -> String {
+    if report.errors.is_empty() {
+        return "0".into();
+    }
+    let by_code: Vec<String> = report.errors.iter().map(|(code, n)| format!("{code:?} {n}")).collect();
+    format!("{} ({})", report.error_count(), by_code.join(", "))
+}
+
+/// A text table, right-aligned columns.
+fn aligned(header: &[&str], rows: &[Vec<String>]) -> String {
+    let mut widths: Vec<usize> = header.iter().map(|h| h.len()).collect();
+    for row in rows {
+        for (w, cell) in widths.iter_mut().zip(row) {
+            *w = (*w).max(cell.len());
+        }
+    }
+    let line =
+        |cells: Vec<&str>| cells.iter().zip(&widths).map(|(c, w)| format!("{c:>w$}")).collect::<Vec<_>>().join("  ");
+    let mut lines = vec![line(header.to_vec())];
+    lines.extend(rows.iter().map(|r| line(r.iter().map(String::as_str).collect())));
+    lines.join("\n")
 }
