@@ -1,33 +1,50 @@
-//! The fastrack gRPC safety service: loads a model repository, serves `fastrack.v1` with health and
-//! reflection, and shuts down gracefully on SIGINT/SIGTERM.
+//! The fastrack gRPC safety service: loads a model repository (and keeps it in line with the directory),
+//! serves `fastrack.v1` with health and reflection on a dedicated compute pool, guards it with TLS and
+//! bearer tokens, exports Prometheus metrics, and drains gracefully on SIGINT/SIGTERM.
 
+pub mod auth;
 pub mod config;
 pub mod convert;
+pub mod deadline;
+pub mod metrics;
 pub mod model;
 pub mod repository;
+pub mod scheduler;
 pub mod services;
 pub mod teb;
 pub mod validate;
 
 use anyhow::Context;
-use config::ServerConfig;
+use auth::{Guard, Role, Tokens};
+use config::Settings;
 use fastrack_proto::v1::{
     model_admin_service_server::ModelAdminServiceServer, model_service_server::ModelServiceServer,
     safety_service_server::SafetyServiceServer,
 };
+use metrics::Metrics;
 use repository::Repository;
+use scheduler::Scheduler;
+use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
-use std::time::Duration;
+use tonic::service::interceptor::InterceptedService;
+use tonic::transport::{Certificate, Identity, ServerTlsConfig};
+use tonic_health::server::HealthReporter;
 use tonic_health::ServingStatus;
 
 /// Services whose health is reported (plus the server as a whole, "").
 const HEALTH_SERVICES: [&str; 4] =
     ["", "fastrack.v1.SafetyService", "fastrack.v1.ModelService", "fastrack.v1.ModelAdminService"];
 
-async fn set_health(reporter: &tonic_health::server::HealthReporter, status: ServingStatus) {
+async fn set_health(reporter: &HealthReporter, status: ServingStatus) {
     for service in HEALTH_SERVICES {
         reporter.set_service_status(service, status).await;
     }
+}
+
+/// SERVING while at least one model version is loaded.
+async fn refresh_health(reporter: &HealthReporter, repository: &Repository) {
+    let serving = repository.loaded_count() > 0;
+    set_health(reporter, if serving { ServingStatus::Serving } else { ServingStatus::NotServing }).await;
 }
 
 /// Resolves on SIGINT or SIGTERM.
@@ -48,39 +65,124 @@ async fn shutdown_signal() {
     #[cfg(not(unix))]
     let terminate = std::future::pending::<()>();
     tokio::select! {
-        _ = interrupt => tracing::info!("SIGINT received, shutting down"),
-        _ = terminate => tracing::info!("SIGTERM received, shutting down"),
+        _ = interrupt => tracing::info!("SIGINT received, draining"),
+        _ = terminate => tracing::info!("SIGTERM received, draining"),
     }
 }
 
-/// Runs the server until a shutdown signal.
-pub async fn run(config: ServerConfig) -> anyhow::Result<()> {
-    let runtime = fastrack_valuefn::runtime::runtime(config.ort_lib.as_deref()).context("loading ONNX Runtime")?;
-    let repository = Arc::new(Repository::new(&config.models, runtime, config.sessions_per_model));
+/// The initial load, then (if configured) a scan of the directory every poll interval.
+fn spawn_repository_tasks(
+    settings: &Settings,
+    repository: Arc<Repository>,
+    reporter: HealthReporter,
+) -> tokio::task::JoinHandle<()> {
+    let poll = settings.poll_interval;
+    tokio::spawn(async move {
+        let repo = Arc::clone(&repository);
+        match tokio::task::spawn_blocking(move || repo.load_all()).await {
+            Ok(Ok(outcomes)) => {
+                let failed = outcomes.iter().filter(|o| o.result.is_err()).count();
+                let loaded = repository.loaded_count();
+                if loaded == 0 {
+                    tracing::error!(failed, "no model loaded; health stays NOT_SERVING");
+                } else {
+                    tracing::info!(loaded, failed, "models ready; health SERVING");
+                }
+            }
+            Ok(Err(e)) => tracing::error!(error = %e, "model repository unreadable; health stays NOT_SERVING"),
+            Err(e) => tracing::error!(error = %e, "model loading task failed"),
+        }
+        refresh_health(&reporter, &repository).await;
+        let Some(poll) = poll else { return };
+        let mut ticker = tokio::time::interval(poll);
+        ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
+        ticker.tick().await;
+        loop {
+            ticker.tick().await;
+            let repo = Arc::clone(&repository);
+            match tokio::task::spawn_blocking(move || repo.sync()).await {
+                Ok(Ok(report)) if !report.outcomes.is_empty() || !report.removed.is_empty() => {
+                    tracing::info!(
+                        loaded = report.outcomes.iter().filter(|o| o.result.is_ok()).count(),
+                        rejected = report.outcomes.iter().filter(|o| o.result.is_err()).count(),
+                        removed = report.removed.len(),
+                        "repository changed"
+                    );
+                    refresh_health(&reporter, &repository).await;
+                }
+                Ok(Ok(_)) => {}
+                Ok(Err(e)) => tracing::warn!(error = %e, "repository scan failed; serving what is loaded"),
+                Err(e) => tracing::error!(error = %e, "repository scan task failed"),
+            }
+        }
+    })
+}
+
+/// A request id: the caller's `x-request-id` if sent, else a fresh one unique within this process.
+fn request_id(request: &tonic::codegen::http::Request<()>) -> String {
+    static NEXT: AtomicU64 = AtomicU64::new(1);
+    match request.headers().get("x-request-id").and_then(|v| v.to_str().ok()) {
+        Some(id) if !id.is_empty() && id.len() <= 128 => id.to_string(),
+        _ => format!("{:x}-{:x}", std::process::id(), NEXT.fetch_add(1, Ordering::Relaxed)),
+    }
+}
+
+fn tls_config(tls: &config::TlsFiles) -> ServerTlsConfig {
+    let config = ServerTlsConfig::new().identity(Identity::from_pem(&tls.cert, &tls.key));
+    match &tls.client_ca {
+        Some(ca) => config.client_ca_root(Certificate::from_pem(ca)),
+        None => config,
+    }
+}
+
+fn log_exposure(settings: &Settings, local: std::net::SocketAddr, tokens: &Tokens) {
+    let (users, admins) = tokens.counts();
+    let tls = match &settings.tls {
+        None => "off",
+        Some(t) if t.client_ca.is_some() => "mutual",
+        Some(_) => "on",
+    };
+    if local.ip().is_loopback() {
+        tracing::info!(address = %local, tls, user_tokens = users, admin_tokens = admins, "listening on loopback only");
+    } else if tls == "off" || tokens.is_empty() {
+        tracing::warn!(address = %local, tls, user_tokens = users, admin_tokens = admins, "listening beyond loopback without TLS or without tokens");
+    } else {
+        tracing::info!(address = %local, tls, user_tokens = users, admin_tokens = admins, "listening");
+    }
+}
+
+/// Runs the server until a shutdown signal, then drains for at most the grace period.
+pub async fn run(settings: Settings) -> anyhow::Result<()> {
+    let runtime = fastrack_valuefn::runtime::runtime(settings.ort_lib.as_deref()).context("loading ONNX Runtime")?;
+    let tokens = Arc::new(Tokens::parse(&settings.token_entries).context("bearer tokens")?);
+    let metrics = Arc::new(Metrics::new());
+    let scheduler =
+        Arc::new(Scheduler::start(settings.compute, Arc::clone(&metrics)).context("starting the compute pool")?);
+    let repository = Arc::new(Repository::new(
+        &settings.models,
+        runtime,
+        settings.compute.threads,
+        settings.pins.clone(),
+        Arc::clone(&metrics),
+    ));
     let (reporter, health) = tonic_health::server::health_reporter();
     set_health(&reporter, ServingStatus::NotServing).await;
+    let repository_tasks = spawn_repository_tasks(&settings, Arc::clone(&repository), reporter.clone());
 
-    let loader = {
-        let repository = Arc::clone(&repository);
-        let reporter = reporter.clone();
-        tokio::spawn(async move {
-            let repo = Arc::clone(&repository);
-            let outcome = tokio::task::spawn_blocking(move || repo.load_all()).await;
-            match outcome {
-                Ok(Ok(outcomes)) => {
-                    let failed = outcomes.iter().filter(|o| o.result.is_err()).count();
-                    let loaded = repository.loaded_count();
-                    if loaded == 0 {
-                        tracing::error!(failed, "no model loaded; health stays NOT_SERVING");
-                    } else {
-                        tracing::info!(loaded, failed, "models ready; health SERVING");
-                        set_health(&reporter, ServingStatus::Serving).await;
-                    }
+    let metrics_server = match settings.metrics_listen {
+        Some(address) => {
+            let listener = tokio::net::TcpListener::bind(address)
+                .await
+                .with_context(|| format!("binding the metrics endpoint {address}"))?;
+            tracing::info!(address = %listener.local_addr()?, "Prometheus metrics at /metrics");
+            let metrics = Arc::clone(&metrics);
+            Some(tokio::spawn(async move {
+                if let Err(e) = metrics::serve(listener, metrics, std::future::pending()).await {
+                    tracing::error!(error = %e, "metrics endpoint failed");
                 }
-                Ok(Err(e)) => tracing::error!(error = %e, "model repository unreadable; health stays NOT_SERVING"),
-                Err(e) => tracing::error!(error = %e, "model loading task failed"),
-            }
-        })
+            }))
+        }
+        None => None,
     };
 
     let reflection = tonic_reflection::server::Builder::configure()
@@ -88,31 +190,79 @@ pub async fn run(config: ServerConfig) -> anyhow::Result<()> {
         .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
         .build_v1()
         .context("building the reflection service")?;
-    let safety = services::safety::Safety {
+    let (drain_tx, drain_rx) = tokio::sync::watch::channel(false);
+    let limit = settings.max_message_bytes;
+    let safety = SafetyServiceServer::new(services::safety::Safety {
         repository: Arc::clone(&repository),
-        stream_idle_timeout: Duration::from_secs_f64(config.stream_idle_timeout_s),
-    };
+        scheduler: Arc::clone(&scheduler),
+        metrics: Arc::clone(&metrics),
+        stream_idle_timeout: settings.stream_idle_timeout,
+        draining: drain_rx.clone(),
+    })
+    .max_decoding_message_size(limit)
+    .max_encoding_message_size(limit);
+    let models = ModelServiceServer::new(services::models::Models {
+        repository: Arc::clone(&repository),
+        metrics: Arc::clone(&metrics),
+    })
+    .max_decoding_message_size(limit)
+    .max_encoding_message_size(limit);
+    let admin = ModelAdminServiceServer::new(services::admin::Admin {
+        repository: Arc::clone(&repository),
+        metrics: Arc::clone(&metrics),
+    })
+    .max_decoding_message_size(limit)
+    .max_encoding_message_size(limit);
+    let user_guard = Guard::new(Arc::clone(&tokens), Role::User, Arc::clone(&metrics));
+    let admin_guard = Guard::new(Arc::clone(&tokens), Role::Admin, Arc::clone(&metrics));
+
     let listener =
-        tokio::net::TcpListener::bind(config.listen).await.with_context(|| format!("binding {}", config.listen))?;
-    let local = listener.local_addr()?;
-    if local.ip().is_loopback() {
-        tracing::info!(address = %local, "listening on loopback only");
-    } else {
-        tracing::warn!(address = %local, "listening beyond loopback");
+        tokio::net::TcpListener::bind(settings.listen).await.with_context(|| format!("binding {}", settings.listen))?;
+    log_exposure(&settings, listener.local_addr()?, &tokens);
+    let mut builder =
+        tonic::transport::Server::builder().max_concurrent_streams(settings.max_concurrent_streams).trace_fn(
+            |request| tracing::info_span!("rpc", path = %request.uri().path(), request_id = %request_id(request)),
+        );
+    if let Some(tls) = &settings.tls {
+        builder = builder.tls_config(tls_config(tls)).context("TLS configuration")?;
     }
-    tonic::transport::Server::builder()
+    let stop = {
+        let reporter = reporter.clone();
+        async move {
+            shutdown_signal().await;
+            set_health(&reporter, ServingStatus::NotServing).await;
+            let _ = drain_tx.send(true);
+        }
+    };
+    let serve = builder
         .add_service(health)
         .add_service(reflection)
-        .add_service(ModelServiceServer::new(services::models::Models { repository: Arc::clone(&repository) }))
-        .add_service(ModelAdminServiceServer::new(services::admin::Admin { repository: Arc::clone(&repository) }))
-        .add_service(SafetyServiceServer::new(safety))
+        .add_service(InterceptedService::new(models, user_guard.clone()))
+        .add_service(InterceptedService::new(safety, user_guard))
+        .add_service(InterceptedService::new(admin, admin_guard))
         .serve_with_incoming_shutdown(
             tonic::transport::server::TcpIncoming::from(listener).with_nodelay(Some(true)),
-            shutdown_signal(),
-        )
-        .await
-        .context("serving")?;
-    loader.abort();
+            stop,
+        );
+    let grace = settings.shutdown_grace;
+    let mut draining = drain_rx;
+    let drain_deadline = async move {
+        let _ = draining.wait_for(|d| *d).await;
+        tokio::time::sleep(grace).await;
+    };
+    tokio::select! {
+        result = serve => result.context("serving")?,
+        _ = drain_deadline => tracing::warn!(
+            open_streams = metrics.active_streams(),
+            grace_s = grace.as_secs_f64(),
+            "drain deadline passed; exiting with calls still open"
+        ),
+    }
+    repository_tasks.abort();
+    if let Some(task) = metrics_server {
+        task.abort();
+    }
+    tokio::task::spawn_blocking(move || scheduler.shutdown()).await.context("stopping the compute pool")?;
     tracing::info!("server stopped");
     Ok(())
 }

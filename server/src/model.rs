@@ -1,12 +1,10 @@
 //! One loaded model version: its manifest, its evaluator and the answers derived from them.
 
 use crate::teb::row_for;
-use crate::validate::ValidBatch;
 use fastrack_proto::v1 as pb;
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::manifest::{Manifest, TebRow};
 use fastrack_valuefn::runtime::{Evaluation, Evaluator, GraphDims, Runtime, RuntimeError};
-use std::sync::Arc;
 use tonic::Status;
 
 /// A model version ready to answer.
@@ -18,20 +16,31 @@ pub struct LoadedModel {
     evaluator: Evaluator,
 }
 
-/// What a batch evaluation returns, beside the raw graph outputs.
-pub struct BatchResult {
-    /// Graph outputs.
-    pub outputs: Evaluation,
-    /// Per item: `V <= TEB level` of its largest parameter.
-    pub in_teb: Vec<bool>,
+/// Why a bundle could not be made ready.
+#[derive(Debug, thiserror::Error)]
+pub enum ModelError {
+    /// ONNX Runtime refused the graph or failed to run it.
+    #[error(transparent)]
+    Runtime(#[from] RuntimeError),
+    /// The warm-up evaluation gave NaN or infinite outputs.
+    #[error("warm-up at the centre of the domain gave non-finite outputs (value {0}); the graph is broken")]
+    NonFinite(f32),
 }
 
 impl LoadedModel {
-    /// Builds sessions for a checked bundle.
-    pub fn new(bundle: Bundle, runtime: &Runtime, sessions: usize) -> Result<Self, RuntimeError> {
+    /// Builds `sessions` sessions for a checked bundle and warms each of them up on the centre of the domain
+    /// (rejecting a graph whose outputs there are not finite).
+    pub fn new(bundle: Bundle, runtime: &Runtime, sessions: usize) -> Result<Self, ModelError> {
         let m = &bundle.manifest;
         let dims = GraphDims { n_state: m.n_state(), n_params: m.n_params(), n_control: m.n_control() };
         let evaluator = Evaluator::new(runtime, &bundle.onnx, dims, sessions)?;
+        let centre = |min: f64, max: f64| (0.5 * (min + max)) as f32;
+        let state: Vec<f32> = m.state.iter().map(|d| centre(d.min, d.max)).collect();
+        let params: Vec<f32> = m.params.iter().map(|d| centre(d.min, d.max)).collect();
+        let warm = evaluator.warm_up(&state, &params)?;
+        if let Some(bad) = warm.value.iter().chain(&warm.grad).chain(&warm.control).find(|x| !x.is_finite()) {
+            return Err(ModelError::NonFinite(*bad));
+        }
         let info = crate::convert::model_info(&bundle.manifest);
         Ok(Self { manifest: bundle.manifest, info, evaluator })
     }
@@ -46,23 +55,16 @@ impl LoadedModel {
         row_for(&self.manifest.teb_table, beta)
     }
 
-    /// Evaluates a validated batch on a blocking-pool thread.
-    pub async fn evaluate(self: &Arc<Self>, batch: ValidBatch) -> Result<(BatchResult, ValidBatch), Status> {
-        let model = Arc::clone(self);
-        tokio::task::spawn_blocking(move || {
-            let outputs = model.evaluator.evaluate(&batch.states, &batch.params).map_err(|e| {
-                tracing::error!(model = %model.label(), error = %e, "evaluation failed");
-                Status::internal(format!("evaluation of model {} failed: {e}", model.label()))
-            })?;
-            let in_teb = outputs
-                .value
-                .iter()
-                .zip(&batch.max_beta)
-                .map(|(&v, &beta)| model.row_for(beta).is_some_and(|row| f64::from(v) <= row.served_level()))
-                .collect();
-            Ok((BatchResult { outputs, in_teb }, batch))
+    /// `V <= TEB level` of the row for `beta`.
+    pub fn in_teb(&self, value: f32, beta: f64) -> bool {
+        self.row_for(beta).is_some_and(|row| f64::from(value) <= row.served_level())
+    }
+
+    /// Evaluates `[N x n_state]` states with `[N x n_params]` params; blocks (compute-pool threads only).
+    pub fn compute(&self, states: &[f32], params: &[f32]) -> Result<Evaluation, Status> {
+        self.evaluator.evaluate(states, params).map_err(|e| {
+            tracing::error!(model = %self.label(), error = %e, "evaluation failed");
+            Status::internal(format!("evaluation of model {} failed: {e}", self.label()))
         })
-        .await
-        .map_err(|e| Status::internal(format!("evaluation task failed: {e}")))?
     }
 }

@@ -98,11 +98,27 @@ pub fn evaluator_for(dir: &Path) -> (Evaluator, Manifest) {
     (Evaluator::new(rt, &bundle.onnx, dims, 1).expect("evaluator"), m)
 }
 
+/// Tick `seq` of a dubins4d robot drifting around its plan (relative state inside the domain).
+pub fn robot_tick(seq: u64, robot: u64) -> fastrack_client::pb::TrackTick {
+    let phase = seq as f64 * 0.01 + robot as f64;
+    fastrack_client::pb::TrackTick {
+        seq,
+        tracker_state: vec![0.3 * phase.sin(), 0.2 * phase.cos(), phase % 3.0, 1.0 + 0.5 * phase.sin()],
+        planner_state: vec![0.0, 0.0],
+        d_obs: Some(1.0 + (seq % 7) as f64),
+    }
+}
+
 /// Path of the `fastrack-server` binary built beside this test executable (`target/<profile>/`).
 pub fn server_binary() -> PathBuf {
+    binary("fastrack-server")
+}
+
+/// Path of a workspace binary built beside this test executable (`target/<profile>/`).
+pub fn binary(name: &str) -> PathBuf {
     let exe = std::env::current_exe().expect("test executable path");
     let profile_dir = exe.parent().and_then(Path::parent).expect("target/<profile>/deps/<test>");
-    let binary = profile_dir.join("fastrack-server");
+    let binary = profile_dir.join(name);
     assert!(
         binary.is_file(),
         "{} is missing: build it first (`cargo build --workspace --bins`, which scripts/test.sh does)",
@@ -111,7 +127,8 @@ pub fn server_binary() -> PathBuf {
     binary
 }
 
-fn free_port() -> u16 {
+/// A free loopback port (bound and released).
+pub fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0").expect("bind").local_addr().expect("addr").port()
 }
 
@@ -120,6 +137,8 @@ pub struct TestServer {
     child: Child,
     /// `http://127.0.0.1:<port>`.
     pub endpoint: String,
+    /// `127.0.0.1:<port>` of the Prometheus endpoint, if started with one.
+    pub metrics: Option<String>,
     log: PathBuf,
     _log_dir: tempfile::TempDir,
 }
@@ -142,20 +161,83 @@ impl TestServer {
             .stderr(log_file)
             .spawn()
             .expect("spawn fastrack-server");
-        Self { child, endpoint: format!("http://127.0.0.1:{port}"), log, _log_dir: log_dir }
+        let metrics = extra_args.iter().position(|a| *a == "--metrics-listen").map(|i| extra_args[i + 1].to_string());
+        Self { child, endpoint: format!("http://127.0.0.1:{port}"), metrics, log, _log_dir: log_dir }
+    }
+
+    /// Starts the server with a Prometheus endpoint on a free port, plus `extra_args`, and waits for SERVING.
+    pub async fn start_observed(models: &Path, extra_args: &[&str]) -> (Self, FastrackClient) {
+        let metrics = format!("127.0.0.1:{}", free_port());
+        let mut args = vec!["--metrics-listen", metrics.as_str()];
+        args.extend_from_slice(extra_args);
+        let server = Self::start(models, &args);
+        let client = server.client().await;
+        if client.wait_until_serving(Duration::from_secs(60)).await.is_err() {
+            panic!("server never became SERVING; log:\n{}", server.log_text());
+        }
+        (server, client)
+    }
+
+    /// The `/metrics` page (OpenMetrics text), fetched over plain HTTP.
+    pub async fn scrape(&self) -> String {
+        use tokio::io::{AsyncReadExt, AsyncWriteExt};
+        let address = self.metrics.as_deref().expect("server started without --metrics-listen");
+        let mut stream = tokio::net::TcpStream::connect(address).await.expect("connect to the metrics endpoint");
+        let request = format!("GET /metrics HTTP/1.1\r\nHost: {address}\r\nConnection: close\r\n\r\n");
+        stream.write_all(request.as_bytes()).await.expect("send the scrape");
+        let mut response = String::new();
+        stream.read_to_string(&mut response).await.expect("read the scrape");
+        assert!(response.starts_with("HTTP/1.1 200"), "scrape failed: {response}");
+        response.split_once("\r\n\r\n").map(|(_, body)| body.to_string()).unwrap_or_default()
+    }
+
+    /// The value of one sample of a scrape (`name{labels}` exactly as exposed), 0 if absent.
+    pub async fn metric(&self, sample: &str) -> f64 {
+        let page = self.scrape().await;
+        page.lines()
+            .find_map(|line| line.strip_prefix(sample).and_then(|rest| rest.strip_prefix(' ')))
+            .map(|v| v.trim().parse().expect("numeric sample"))
+            .unwrap_or(0.0)
+    }
+
+    /// The process id.
+    pub fn pid(&self) -> u32 {
+        self.child.id()
+    }
+
+    /// Resident memory of the process in KiB (Linux `/proc`).
+    pub fn rss_kib(&self) -> u64 {
+        let status = std::fs::read_to_string(format!("/proc/{}/status", self.child.id())).unwrap_or_default();
+        status
+            .lines()
+            .find_map(|l| l.strip_prefix("VmRSS:"))
+            .and_then(|v| v.trim().trim_end_matches("kB").trim().parse().ok())
+            .unwrap_or(0)
     }
 
     /// Connects a client, retrying while the server binds its port.
     pub async fn client(&self) -> FastrackClient {
-        let options =
-            ClientOptions { connect_timeout: Duration::from_secs(2), request_timeout: Duration::from_secs(10) };
+        self.client_with(
+            &self.endpoint,
+            ClientOptions {
+                connect_timeout: Duration::from_secs(2),
+                request_timeout: Duration::from_secs(10),
+                ..Default::default()
+            },
+        )
+        .await
+    }
+
+    /// Connects a client with `options` to `endpoint` (this server's, e.g. with `https://localhost:<port>`),
+    /// retrying while the server binds its port.
+    pub async fn client_with(&self, endpoint: &str, options: ClientOptions) -> FastrackClient {
         for _ in 0..200 {
-            if let Ok(client) = FastrackClient::connect(&self.endpoint, options).await {
+            if let Ok(client) = FastrackClient::connect(endpoint, options.clone()).await {
                 return client;
             }
             tokio::time::sleep(Duration::from_millis(50)).await;
         }
-        panic!("server at {} never accepted a connection; log:\n{}", self.endpoint, self.log_text());
+        panic!("server at {endpoint} never accepted a connection; log:\n{}", self.log_text());
     }
 
     /// Starts the server and waits until health is SERVING.

@@ -242,6 +242,23 @@ impl Evaluator {
         result
     }
 
+    /// Runs every session of the pool once on the batch (ONNX Runtime allocates and plans on the first
+    /// run), returning the last evaluation. Meant for load time, before the evaluator is shared.
+    pub fn warm_up(&self, state: &[f32], params: &[f32]) -> Result<Evaluation, RuntimeError> {
+        let mut sessions = std::mem::take(&mut *self.idle.lock().unwrap_or_else(|e| e.into_inner()));
+        let n = state.len() / self.dims.n_state.max(1);
+        let mut last = Err(RuntimeError::Inference("the evaluator has no session".into()));
+        for session in &mut sessions {
+            last = Self::run(session, state, params, n, self.dims);
+            if last.is_err() {
+                break;
+            }
+        }
+        self.idle.lock().unwrap_or_else(|e| e.into_inner()).extend(sessions);
+        self.returned.notify_all();
+        last
+    }
+
     fn run(
         session: &mut Session,
         state: &[f32],

@@ -1,15 +1,24 @@
 //! `ModelAdminService`: load, unload and reload model versions at run time.
 
+use super::observe;
+use crate::metrics::Metrics;
 use crate::repository::{LoadOutcome, Repository};
 use fastrack_proto::v1 as pb;
 use pb::model_admin_service_server::ModelAdminService;
 use std::sync::Arc;
+use std::time::Instant;
 use tonic::{Request, Response, Status};
 
 /// Changes what the repository serves.
 pub struct Admin {
     /// The repository.
     pub repository: Arc<Repository>,
+    /// Metrics.
+    pub metrics: Arc<Metrics>,
+}
+
+fn version_filter(version: u32) -> Option<u32> {
+    (version != 0).then_some(version)
 }
 
 impl Admin {
@@ -20,19 +29,8 @@ impl Admin {
             .map_err(|e| Status::internal(format!("load task failed: {e}")))?
             .map_err(Status::internal)
     }
-}
 
-fn version_filter(version: u32) -> Option<u32> {
-    (version != 0).then_some(version)
-}
-
-#[tonic::async_trait]
-impl ModelAdminService for Admin {
-    async fn load_model(
-        &self,
-        request: Request<pb::LoadModelRequest>,
-    ) -> Result<Response<pb::LoadModelResponse>, Status> {
-        let req = request.into_inner();
+    async fn load_one(&self, req: pb::LoadModelRequest) -> Result<Response<pb::LoadModelResponse>, Status> {
         if req.name.is_empty() {
             return Err(Status::invalid_argument("name is required: a model folder of the repository"));
         }
@@ -56,11 +54,7 @@ impl ModelAdminService for Admin {
         Ok(Response::new(pb::LoadModelResponse { loaded_versions: self.repository.versions(&req.name) }))
     }
 
-    async fn unload_model(
-        &self,
-        request: Request<pb::UnloadModelRequest>,
-    ) -> Result<Response<pb::UnloadModelResponse>, Status> {
-        let req = request.into_inner();
+    fn unload_one(&self, req: &pb::UnloadModelRequest) -> Result<Response<pb::UnloadModelResponse>, Status> {
         let unloaded = self.repository.unload(&req.name, version_filter(req.version));
         if unloaded.is_empty() {
             return Err(Status::not_found(format!(
@@ -72,11 +66,7 @@ impl ModelAdminService for Admin {
         Ok(Response::new(pb::UnloadModelResponse { unloaded_versions: unloaded }))
     }
 
-    async fn reload_model(
-        &self,
-        request: Request<pb::ReloadModelRequest>,
-    ) -> Result<Response<pb::ReloadModelResponse>, Status> {
-        let name = request.into_inner().name;
+    async fn reload(&self, name: String) -> Result<Response<pb::ReloadModelResponse>, Status> {
         let outcomes = self.load((!name.is_empty()).then_some(name), None).await?;
         Ok(Response::new(pb::ReloadModelResponse {
             outcomes: outcomes
@@ -89,5 +79,41 @@ impl ModelAdminService for Admin {
                 })
                 .collect(),
         }))
+    }
+}
+
+#[tonic::async_trait]
+impl ModelAdminService for Admin {
+    async fn load_model(
+        &self,
+        request: Request<pb::LoadModelRequest>,
+    ) -> Result<Response<pb::LoadModelResponse>, Status> {
+        let start = Instant::now();
+        let req = request.into_inner();
+        let model = pb::ModelRef { name: req.name.clone(), version: req.version };
+        let answer = self.load_one(req).await;
+        observe(&self.metrics, &self.repository, "LoadModel", Some(&model), start, answer)
+    }
+
+    async fn unload_model(
+        &self,
+        request: Request<pb::UnloadModelRequest>,
+    ) -> Result<Response<pb::UnloadModelResponse>, Status> {
+        let start = Instant::now();
+        let req = request.into_inner();
+        let answer = self.unload_one(&req);
+        let model = pb::ModelRef { name: req.name, version: req.version };
+        observe(&self.metrics, &self.repository, "UnloadModel", Some(&model), start, answer)
+    }
+
+    async fn reload_model(
+        &self,
+        request: Request<pb::ReloadModelRequest>,
+    ) -> Result<Response<pb::ReloadModelResponse>, Status> {
+        let start = Instant::now();
+        let name = request.into_inner().name;
+        let model = pb::ModelRef { name: name.clone(), version: 0 };
+        let answer = self.reload(name).await;
+        observe(&self.metrics, &self.repository, "ReloadModel", Some(&model), start, answer)
     }
 }

@@ -1,8 +1,10 @@
 //! `SafetyService`: planner speed, tracking error bounds, value and tracking control (unary), plus the
 //! `Track` stream (see [`super::track`]).
 
-use crate::model::BatchResult;
+use super::observe;
+use crate::metrics::Metrics;
 use crate::repository::Repository;
+use crate::scheduler::{BatchResult, Scheduler};
 use crate::teb::query_planner_control;
 use crate::validate::{self, ValidBatch, MAX_BOUNDARY_POINTS};
 use fastrack_proto::v1 as pb;
@@ -10,7 +12,7 @@ use fastrack_valuefn::manifest::{boundary_directions, TebRow};
 use pb::safety_service_server::SafetyService;
 use std::pin::Pin;
 use std::sync::Arc;
-use std::time::Duration;
+use std::time::{Duration, Instant};
 use tokio_stream::Stream;
 use tonic::{Request, Response, Status, Streaming};
 
@@ -18,8 +20,14 @@ use tonic::{Request, Response, Status, Streaming};
 pub struct Safety {
     /// The repository.
     pub repository: Arc<Repository>,
+    /// The compute pool.
+    pub scheduler: Arc<Scheduler>,
+    /// Metrics.
+    pub metrics: Arc<Metrics>,
     /// Default idle timeout of `Track` streams.
     pub stream_idle_timeout: Duration,
+    /// Turns true when the server starts draining.
+    pub draining: tokio::sync::watch::Receiver<bool>,
 }
 
 /// `count` points on the boundary of a 2-D error set, radii interpolated linearly in angle between the
@@ -57,10 +65,11 @@ impl Safety {
         states: &[f64],
         params: &[f64],
         policy: pb::OutOfDomainPolicy,
+        deadline: Option<Instant>,
     ) -> Result<(u32, BatchResult, ValidBatch), Status> {
         let model = self.repository.resolve(model)?;
         let batch = validate::batch(&model, states, params, policy)?;
-        let (result, batch) = model.evaluate(batch).await?;
+        let (result, batch) = self.scheduler.evaluate(&model, batch, deadline).await?;
         Ok((model.manifest.version, result, batch))
     }
 }
@@ -75,24 +84,101 @@ impl SafetyService for Safety {
         &self,
         request: Request<pb::QueryPlannerControlRequest>,
     ) -> Result<Response<pb::QueryPlannerControlResponse>, Status> {
+        let start = Instant::now();
         let req = request.into_inner();
-        let model = self.repository.resolve(req.model.as_ref())?;
-        let d_obs = validate::d_obs(req.d_obs)?;
-        let q = query_planner_control(&model.manifest.teb_table, d_obs);
-        Ok(Response::new(pb::QueryPlannerControlResponse {
-            beta_query: q.beta,
-            dteb_radius: q.dteb_radius,
-            steb_radius: q.steb_radius,
-            steb_exceeds_half_distance: q.steb_exceeds_half_distance,
-            model_version: model.manifest.version,
-        }))
+        let answer = (|| {
+            let model = self.repository.resolve(req.model.as_ref())?;
+            let d_obs = validate::d_obs(req.d_obs)?;
+            let q = query_planner_control(&model.manifest.teb_table, d_obs);
+            Ok(Response::new(pb::QueryPlannerControlResponse {
+                beta_query: q.beta,
+                dteb_radius: q.dteb_radius,
+                steb_radius: q.steb_radius,
+                steb_exceeds_half_distance: q.steb_exceeds_half_distance,
+                model_version: model.manifest.version,
+            }))
+        })();
+        observe(&self.metrics, &self.repository, "QueryPlannerControl", req.model.as_ref(), start, answer)
     }
 
     async fn get_tracking_error_bound(
         &self,
         request: Request<pb::GetTrackingErrorBoundRequest>,
     ) -> Result<Response<pb::GetTrackingErrorBoundResponse>, Status> {
+        let start = Instant::now();
         let req = request.into_inner();
+        let answer = self.tracking_error_bound(&req);
+        observe(&self.metrics, &self.repository, "GetTrackingErrorBound", req.model.as_ref(), start, answer)
+    }
+
+    async fn evaluate_value(
+        &self,
+        request: Request<pb::EvaluateValueRequest>,
+    ) -> Result<Response<pb::EvaluateValueResponse>, Status> {
+        let start = Instant::now();
+        let deadline = crate::deadline::from_metadata(request.metadata(), start);
+        let req = request.into_inner();
+        let answer = self
+            .evaluate(req.model.as_ref(), &req.states, &req.params, req.out_of_domain(), deadline)
+            .await
+            .map(|(model_version, result, batch)| {
+                Response::new(pb::EvaluateValueResponse {
+                    values: widen(&result.outputs.value),
+                    gradients: widen(&result.outputs.grad),
+                    controls: widen(&result.outputs.control),
+                    in_teb: result.in_teb,
+                    in_domain: batch.in_domain,
+                    model_version,
+                })
+            });
+        observe(&self.metrics, &self.repository, "EvaluateValue", req.model.as_ref(), start, answer)
+    }
+
+    async fn tracking_control(
+        &self,
+        request: Request<pb::TrackingControlRequest>,
+    ) -> Result<Response<pb::TrackingControlResponse>, Status> {
+        let start = Instant::now();
+        let deadline = crate::deadline::from_metadata(request.metadata(), start);
+        let req = request.into_inner();
+        let answer = self
+            .evaluate(req.model.as_ref(), &req.states, &req.params, req.out_of_domain(), deadline)
+            .await
+            .map(|(model_version, result, batch)| {
+                Response::new(pb::TrackingControlResponse {
+                    controls: widen(&result.outputs.control),
+                    values: widen(&result.outputs.value),
+                    in_teb: result.in_teb,
+                    in_domain: batch.in_domain,
+                    model_version,
+                })
+            });
+        observe(&self.metrics, &self.repository, "TrackingControl", req.model.as_ref(), start, answer)
+    }
+
+    type TrackStream = Pin<Box<dyn Stream<Item = Result<pb::TrackResponse, Status>> + Send + 'static>>;
+
+    async fn track(
+        &self,
+        request: Request<Streaming<pb::TrackRequest>>,
+    ) -> Result<Response<Self::TrackStream>, Status> {
+        let context = super::track::StreamContext {
+            repository: Arc::clone(&self.repository),
+            scheduler: Arc::clone(&self.scheduler),
+            metrics: Arc::clone(&self.metrics),
+            default_idle: self.stream_idle_timeout,
+            draining: self.draining.clone(),
+        };
+        let stream = super::track::open(context, request.into_inner()).await?;
+        Ok(Response::new(Box::pin(stream)))
+    }
+}
+
+impl Safety {
+    fn tracking_error_bound(
+        &self,
+        req: &pb::GetTrackingErrorBoundRequest,
+    ) -> Result<Response<pb::GetTrackingErrorBoundResponse>, Status> {
         let model = self.repository.resolve(req.model.as_ref())?;
         let beta = validate::beta(&model, req.beta)?;
         if req.boundary_points > MAX_BOUNDARY_POINTS {
@@ -120,49 +206,5 @@ impl SafetyService for Safety {
             boundary,
             model_version: model.manifest.version,
         }))
-    }
-
-    async fn evaluate_value(
-        &self,
-        request: Request<pb::EvaluateValueRequest>,
-    ) -> Result<Response<pb::EvaluateValueResponse>, Status> {
-        let req = request.into_inner();
-        let (model_version, result, batch) =
-            self.evaluate(req.model.as_ref(), &req.states, &req.params, req.out_of_domain()).await?;
-        Ok(Response::new(pb::EvaluateValueResponse {
-            values: widen(&result.outputs.value),
-            gradients: widen(&result.outputs.grad),
-            controls: widen(&result.outputs.control),
-            in_teb: result.in_teb,
-            in_domain: batch.in_domain,
-            model_version,
-        }))
-    }
-
-    async fn tracking_control(
-        &self,
-        request: Request<pb::TrackingControlRequest>,
-    ) -> Result<Response<pb::TrackingControlResponse>, Status> {
-        let req = request.into_inner();
-        let (model_version, result, batch) =
-            self.evaluate(req.model.as_ref(), &req.states, &req.params, req.out_of_domain()).await?;
-        Ok(Response::new(pb::TrackingControlResponse {
-            controls: widen(&result.outputs.control),
-            values: widen(&result.outputs.value),
-            in_teb: result.in_teb,
-            in_domain: batch.in_domain,
-            model_version,
-        }))
-    }
-
-    type TrackStream = Pin<Box<dyn Stream<Item = Result<pb::TrackResponse, Status>> + Send + 'static>>;
-
-    async fn track(
-        &self,
-        request: Request<Streaming<pb::TrackRequest>>,
-    ) -> Result<Response<Self::TrackStream>, Status> {
-        let stream =
-            super::track::open(Arc::clone(&self.repository), request.into_inner(), self.stream_idle_timeout).await?;
-        Ok(Response::new(Box::pin(stream)))
     }
 }

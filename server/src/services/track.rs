@@ -1,7 +1,9 @@
 //! The `Track` bidirectional stream: one per robot, answering every tick in order and keeping `beta_old`.
 
+use crate::metrics::{code_name, Metrics};
 use crate::model::LoadedModel;
 use crate::repository::Repository;
+use crate::scheduler::Scheduler;
 use crate::teb::query_planner_control;
 use crate::validate;
 use fastrack_proto::v1 as pb;
@@ -10,52 +12,109 @@ use std::sync::Arc;
 use std::time::Duration;
 use tokio_stream::wrappers::ReceiverStream;
 use tokio_stream::StreamExt;
-use tonic::{Status, Streaming};
+use tonic::{Code, Status, Streaming};
+use tracing::Instrument;
+
+/// What a stream needs from the server.
+pub struct StreamContext {
+    /// Model lookup at `open`.
+    pub repository: Arc<Repository>,
+    /// The compute pool.
+    pub scheduler: Arc<Scheduler>,
+    /// Metrics.
+    pub metrics: Arc<Metrics>,
+    /// Idle timeout when `open` asks for none.
+    pub default_idle: Duration,
+    /// Turns true when the server drains: the stream ends with `UNAVAILABLE` after its current tick.
+    pub draining: tokio::sync::watch::Receiver<bool>,
+}
+
+/// Counts an open stream in the active-streams gauge until dropped, and the stream's final code.
+struct StreamGuard {
+    metrics: Arc<Metrics>,
+    model: String,
+    code: Code,
+}
+
+impl Drop for StreamGuard {
+    fn drop(&mut self) {
+        self.metrics.stream_delta(-1);
+        self.metrics.call("Track", &self.model, self.code, None);
+        tracing::debug!(model = %self.model, code = code_name(self.code), "track stream closed");
+    }
+}
 
 /// Reads the opening message, resolves the model (the stream keeps that version for its lifetime) and
 /// spawns the tick loop. Errors before the first tick end the call with their status.
 pub async fn open(
-    repository: Arc<Repository>,
+    context: StreamContext,
     mut inbound: Streaming<pb::TrackRequest>,
-    default_idle: Duration,
 ) -> Result<ReceiverStream<Result<pb::TrackResponse, Status>>, Status> {
-    let first = tokio::time::timeout(default_idle, inbound.next())
-        .await
-        .map_err(|_| Status::deadline_exceeded(format!("no open message within {default_idle:?}")))?;
-    let open = match first {
-        Some(Ok(pb::TrackRequest { msg: Some(Msg::Open(open)) })) => open,
-        Some(Ok(_)) => {
-            return Err(Status::invalid_argument(
-                "the first message of a Track stream must be `open` (model and options)",
-            ))
+    let default_idle = context.default_idle;
+    let opened = async {
+        let first = tokio::time::timeout(default_idle, inbound.next())
+            .await
+            .map_err(|_| Status::deadline_exceeded(format!("no open message within {default_idle:?}")))?;
+        let open = match first {
+            Some(Ok(pb::TrackRequest { msg: Some(Msg::Open(open)) })) => open,
+            Some(Ok(_)) => {
+                return Err(Status::invalid_argument(
+                    "the first message of a Track stream must be `open` (model and options)",
+                ))
+            }
+            Some(Err(status)) => return Err(status),
+            None => return Err(Status::cancelled("stream closed before `open`")),
+        };
+        let model = context.repository.resolve(open.model.as_ref())?;
+        if !(open.idle_timeout_s.is_finite() && open.idle_timeout_s >= 0.0) {
+            return Err(Status::invalid_argument(format!(
+                "idle_timeout_s = {}; must be finite and >= 0",
+                open.idle_timeout_s
+            )));
         }
-        Some(Err(status)) => return Err(status),
-        None => return Err(Status::cancelled("stream closed before `open`")),
-    };
-    let model = repository.resolve(open.model.as_ref())?;
-    if !(open.idle_timeout_s.is_finite() && open.idle_timeout_s >= 0.0) {
-        return Err(Status::invalid_argument(format!(
-            "idle_timeout_s = {}; must be finite and >= 0",
-            open.idle_timeout_s
-        )));
+        let idle = if open.idle_timeout_s > 0.0 { Duration::from_secs_f64(open.idle_timeout_s) } else { default_idle };
+        Ok((model, idle))
     }
-    let idle = if open.idle_timeout_s > 0.0 { Duration::from_secs_f64(open.idle_timeout_s) } else { default_idle };
+    .await;
+    let (model, idle) = opened.inspect_err(|status| context.metrics.call("Track", "-", status.code(), None))?;
+    context.metrics.stream_delta(1);
+    let guard =
+        StreamGuard { metrics: Arc::clone(&context.metrics), model: model.manifest.name.clone(), code: Code::Ok };
+    tracing::debug!(model = %model.label(), "track stream opened");
     let (tx, rx) = tokio::sync::mpsc::channel(64);
-    tokio::spawn(tick_loop(model, inbound, tx, idle));
+    tokio::spawn(tick_loop(context, model, inbound, tx, idle, guard).in_current_span());
     Ok(ReceiverStream::new(rx))
 }
 
 async fn tick_loop(
+    mut context: StreamContext,
     model: Arc<LoadedModel>,
     mut inbound: Streaming<pb::TrackRequest>,
     tx: tokio::sync::mpsc::Sender<Result<pb::TrackResponse, Status>>,
     idle: Duration,
+    mut guard: StreamGuard,
 ) {
     let mut beta_old = model.manifest.beta_range().1;
     loop {
-        let next = match tokio::time::timeout(idle, inbound.next()).await {
+        if *context.draining.borrow() {
+            guard.code = Code::Unavailable;
+            let _ = tx.send(Err(Status::unavailable("the server is shutting down; reconnect to continue"))).await;
+            return;
+        }
+        let next = tokio::select! {
+            next = tokio::time::timeout(idle, inbound.next()) => next,
+            changed = context.draining.changed() => {
+                if changed.is_err() {
+                    guard.code = Code::Unavailable;
+                    return;
+                }
+                continue;
+            }
+        };
+        let next = match next {
             Ok(next) => next,
             Err(_) => {
+                guard.code = Code::DeadlineExceeded;
                 let _ = tx.send(Err(Status::deadline_exceeded(format!("no tick for {idle:?}; stream closed")))).await;
                 return;
             }
@@ -64,27 +123,38 @@ async fn tick_loop(
             None => return,
             Some(Err(status)) => {
                 tracing::debug!(%status, "track stream ended by client");
+                guard.code = Code::Cancelled;
                 return;
             }
-            Some(Ok(pb::TrackRequest { msg: Some(Msg::Tick(tick)) })) => answer(&model, tick, &mut beta_old).await,
+            Some(Ok(pb::TrackRequest { msg: Some(Msg::Tick(tick)) })) => {
+                answer(&context.scheduler, &model, tick, &mut beta_old).await
+            }
             Some(Ok(_)) => pb::TrackReply {
                 error: Some(pb::TickError {
-                    code: tonic::Code::InvalidArgument as i32,
+                    code: Code::InvalidArgument as i32,
                     message: "only one `open` is allowed, at the start; send `tick` messages".into(),
                 }),
                 ..Default::default()
             },
         };
+        let code = reply.error.as_ref().map_or(Code::Ok, |e| Code::from(e.code));
+        context.metrics.tick(&guard.model, code);
         if tx.send(Ok(pb::TrackResponse { reply: Some(reply) })).await.is_err() {
+            guard.code = Code::Cancelled;
             return;
         }
     }
 }
 
 /// Answers one tick; a rejected tick gets an error reply and leaves `beta_old` unchanged.
-async fn answer(model: &Arc<LoadedModel>, tick: pb::TrackTick, beta_old: &mut f64) -> pb::TrackReply {
+async fn answer(
+    scheduler: &Scheduler,
+    model: &Arc<LoadedModel>,
+    tick: pb::TrackTick,
+    beta_old: &mut f64,
+) -> pb::TrackReply {
     let seq = tick.seq;
-    match evaluate_tick(model, tick, *beta_old).await {
+    match evaluate_tick(scheduler, model, tick, *beta_old).await {
         Ok(reply) => {
             *beta_old = reply.beta_query;
             reply
@@ -97,14 +167,19 @@ async fn answer(model: &Arc<LoadedModel>, tick: pb::TrackTick, beta_old: &mut f6
     }
 }
 
-async fn evaluate_tick(model: &Arc<LoadedModel>, tick: pb::TrackTick, beta_old: f64) -> Result<pb::TrackReply, Status> {
+async fn evaluate_tick(
+    scheduler: &Scheduler,
+    model: &Arc<LoadedModel>,
+    tick: pb::TrackTick,
+    beta_old: f64,
+) -> Result<pb::TrackReply, Status> {
     validate::tick(model, &tick.tracker_state, &tick.planner_state)?;
     let d_obs = validate::d_obs(tick.d_obs)?;
     let speed = query_planner_control(&model.manifest.teb_table, d_obs);
     let relative = model.manifest.relative_state(&tick.tracker_state, &tick.planner_state);
     let params = vec![speed.beta; model.manifest.n_params()];
     let batch = validate::batch(model, &relative, &params, pb::OutOfDomainPolicy::Flag)?;
-    let (result, batch) = model.evaluate(batch).await?;
+    let (result, batch) = scheduler.evaluate(model, batch, None).await?;
     Ok(pb::TrackReply {
         seq: tick.seq,
         beta_query: speed.beta,

@@ -1,0 +1,115 @@
+//! `Track` at scale against the real server: a long stream in order, hundreds of concurrent streams, and
+//! streams whose client vanishes (the active-stream gauge must come back to zero).
+
+use fastrack_client::{model_ref, pb};
+use fastrack_e2e::{binary, write_test_bundle, TestServer};
+use fastrack_valuefn::system::dubins4d;
+use std::time::{Duration, Instant};
+
+use fastrack_e2e::robot_tick as tick;
+
+async fn wait_for_metric(server: &TestServer, sample: &str, want: f64) -> f64 {
+    let start = Instant::now();
+    loop {
+        let value = server.metric(sample).await;
+        if value == want || start.elapsed() > Duration::from_secs(20) {
+            return value;
+        }
+        tokio::time::sleep(Duration::from_millis(100)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn ten_thousand_ticks_are_answered_in_order() {
+    let repo = tempfile::tempdir().unwrap();
+    write_test_bundle(repo.path(), &dubins4d::system(), "dubins-test", 1, 4);
+    let (server, client) = TestServer::start_observed(repo.path(), &[]).await;
+    let mut session = client.track(model_ref("dubins-test", 0), 0.0).await.unwrap();
+    const TICKS: u64 = 10_000;
+    let (tx, mut rx) = tokio::sync::mpsc::channel::<pb::TrackTick>(128);
+    let sender = tokio::spawn(async move {
+        for seq in 0..TICKS {
+            tx.send(tick(seq, 0)).await.unwrap();
+        }
+    });
+    // Keep up to 32 ticks in flight: the server must still answer strictly in order.
+    let mut sent = 0u64;
+    let mut previous_beta = None;
+    for expected in 0..TICKS {
+        while sent < TICKS && sent < expected + 32 {
+            session.send(rx.recv().await.unwrap()).await.unwrap();
+            sent += 1;
+        }
+        let reply = session.recv().await.unwrap().expect("a reply for every tick");
+        assert_eq!(reply.seq, expected, "replies out of order");
+        assert!(reply.error.is_none(), "tick {expected}: {:?}", reply.error);
+        assert!(reply.value.is_finite() && reply.control.iter().all(|u| u.is_finite()));
+        if let Some(beta) = previous_beta {
+            assert_eq!(reply.beta_old, beta, "beta_old must be the previous tick's beta_query");
+        }
+        previous_beta = Some(reply.beta_query);
+    }
+    sender.await.unwrap();
+    let answered = server.metric(r#"fastrack_track_ticks_total{rpc="Track",model="dubins-test",code="OK"}"#).await;
+    assert_eq!(answered, TICKS as f64);
+    drop(session);
+    assert_eq!(wait_for_metric(&server, "fastrack_active_streams", 0.0).await, 0.0);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn five_hundred_concurrent_streams_get_every_tick() {
+    let repo = tempfile::tempdir().unwrap();
+    write_test_bundle(repo.path(), &dubins4d::system(), "dubins-test", 1, 4);
+    let (server, _) = TestServer::start_observed(repo.path(), &[]).await;
+    const STREAMS: u64 = 500;
+    const TICKS: u64 = 20;
+    // Ten connections, fifty streams each.
+    let mut clients = Vec::new();
+    for _ in 0..10 {
+        clients.push(server.client().await);
+    }
+    let mut sessions = Vec::new();
+    for robot in 0..STREAMS {
+        sessions.push(clients[robot as usize % 10].track(model_ref("dubins-test", 0), 30.0).await.unwrap());
+    }
+    assert_eq!(server.metric("fastrack_active_streams").await, STREAMS as f64, "every stream open at once");
+    let tasks: Vec<_> = sessions
+        .into_iter()
+        .enumerate()
+        .map(|(robot, mut session)| {
+            tokio::spawn(async move {
+                for seq in 0..TICKS {
+                    let reply = session.tick(tick(seq, robot as u64)).await.expect("tick answered");
+                    assert_eq!(reply.seq, seq);
+                    assert!(reply.error.is_none(), "robot {robot} tick {seq}: {:?}", reply.error);
+                }
+            })
+        })
+        .collect();
+    for task in tasks {
+        task.await.expect("stream task");
+    }
+    let answered = server.metric(r#"fastrack_track_ticks_total{rpc="Track",model="dubins-test",code="OK"}"#).await;
+    assert_eq!(answered, (STREAMS * TICKS) as f64);
+    assert_eq!(wait_for_metric(&server, "fastrack_active_streams", 0.0).await, 0.0);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_vanished_client_frees_its_stream() {
+    let repo = tempfile::tempdir().unwrap();
+    write_test_bundle(repo.path(), &dubins4d::system(), "dubins-test", 1, 4);
+    let (server, _) = TestServer::start_observed(repo.path(), &[]).await;
+    // A robot process that streams ticks and is then killed without closing anything.
+    let mut child = std::process::Command::new(binary("streaming-robot"))
+        .args([server.endpoint.as_str(), "dubins-test", "8"])
+        .spawn()
+        .unwrap();
+    assert_eq!(wait_for_metric(&server, "fastrack_active_streams", 8.0).await, 8.0, "the robot opened 8 streams");
+    child.kill().unwrap();
+    child.wait().unwrap();
+    assert_eq!(wait_for_metric(&server, "fastrack_active_streams", 0.0).await, 0.0, "streams freed after the kill");
+    // The server still serves new streams.
+    let client = server.client().await;
+    let mut session = client.track(model_ref("dubins-test", 0), 0.0).await.unwrap();
+    assert!(session.tick(tick(0, 0)).await.unwrap().error.is_none());
+}
