@@ -1,13 +1,15 @@
 #!/usr/bin/env bash
 # The main job: starts the server on the shipped model repository (models/) and drives it with a short
-# scripted client session through the `fastrack` CLI, then shuts the server down gracefully.
+# scripted client session through the `fastrack` CLI (every RPC, a Track stream, a short load run), shows
+# the Prometheus metrics, then shuts the server down gracefully.
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup-onnxruntime.sh >/dev/null
 cargo build -j2 -p fastrack-server -p fastrack-client --bins
 port=${FASTRACK_DEMO_PORT:-50151}
 export FASTRACK_SERVER="http://127.0.0.1:$port"
-./target/debug/fastrack-server --listen "127.0.0.1:$port" --models models &
+metrics_port=${FASTRACK_DEMO_METRICS_PORT:-50152}
+./target/debug/fastrack-server --listen "127.0.0.1:$port" --models models --metrics-listen "127.0.0.1:$metrics_port" &
 server=$!
 trap 'kill $server 2>/dev/null || true' EXIT
 for _ in $(seq 1 100); do
@@ -25,6 +27,10 @@ fastrack teb "$model" --beta 0.9 --boundary 8
 fastrack control "$model" --state 0.2,-0.1,0.3,1.0 --state 0.5,0.5,-1.0,1.5 --beta 1.0
 fastrack evaluate "$model" --state 0.2,-0.1,0.3,1.0 --beta 0.75
 fastrack track "$model" --ticks 20
+fastrack load --model "$model" --workload track --concurrency 8 --duration-s 2 --warmup-s 0.5
+echo
+echo "\$ curl http://127.0.0.1:$metrics_port/metrics  (excerpt)"
+python3 -c "import urllib.request,sys; print(''.join(l for l in urllib.request.urlopen('http://127.0.0.1:$metrics_port/metrics').read().decode().splitlines(True) if l.startswith(('fastrack_requests_total', 'fastrack_track_ticks_total', 'fastrack_loaded_versions'))))"
 echo
 kill -TERM $server
 wait $server && echo "server shut down cleanly"

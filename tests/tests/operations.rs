@@ -101,3 +101,25 @@ async fn sigterm_drains_open_streams_and_exits_zero() {
     assert!(start.elapsed() < Duration::from_secs(5), "drained well before the grace period");
     assert!(server.log_text().contains("server stopped"));
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn messages_beyond_the_size_limit_are_refused() {
+    let repo = tempfile::tempdir().unwrap();
+    write_test_bundle(repo.path(), &dubins4d::system(), "dubins-test", 1, 1);
+    let (_server, client) = TestServer::start_observed(repo.path(), &["--max-message-bytes", "65536"]).await;
+    // 4,000 states: 128 kB of doubles, twice the limit.
+    let n = 4000;
+    let states: Vec<f64> = (0..n).flat_map(|_| [0.1, 0.2, 0.3, 1.0]).collect();
+    let e = client
+        .tracking_control(model_ref("dubins-test", 0), states, vec![0.9; 2 * n], Default::default())
+        .await
+        .unwrap_err();
+    assert_eq!(e.code(), Some(tonic::Code::OutOfRange), "{e}");
+    assert!(e.to_string().contains("65536"), "the message names the limit: {e}");
+    // A request under the limit is served.
+    let small = client
+        .tracking_control(model_ref("dubins-test", 0), vec![0.1, 0.2, 0.3, 1.0], vec![0.9, 0.9], Default::default())
+        .await
+        .unwrap();
+    assert_eq!(small.controls.len(), 2);
+}
