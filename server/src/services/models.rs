@@ -20,12 +20,13 @@ pub struct Models {
 #[tonic::async_trait]
 impl ModelService for Models {
     async fn list_models(&self, _: Request<pb::ListModelsRequest>) -> Result<Response<pb::ListModelsResponse>, Status> {
+        let start = Instant::now();
         let answer = if self.repository.is_ready() {
             Ok(Response::new(pb::ListModelsResponse { models: self.repository.list() }))
         } else {
             Err(Status::unavailable("models are still loading"))
         };
-        observe(&self.metrics, &self.repository, "ListModels", None, Instant::now(), answer)
+        observe(&self.metrics, &self.repository, "ListModels", None, start, answer)
     }
 
     async fn get_model(&self, request: Request<pb::GetModelRequest>) -> Result<Response<pb::GetModelResponse>, Status> {
