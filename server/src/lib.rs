@@ -42,7 +42,7 @@ async fn set_health(reporter: &HealthReporter, status: ServingStatus) {
 }
 
 /// SERVING while at least one model version is loaded.
-async fn refresh_health(reporter: &HealthReporter, repository: &Repository) {
+pub(crate) async fn refresh_health(reporter: &HealthReporter, repository: &Repository) {
     let serving = repository.loaded_count() > 0;
     set_health(reporter, if serving { ServingStatus::Serving } else { ServingStatus::NotServing }).await;
 }
@@ -210,6 +210,7 @@ pub async fn run(settings: Settings) -> anyhow::Result<()> {
     let admin = ModelAdminServiceServer::new(services::admin::Admin {
         repository: Arc::clone(&repository),
         metrics: Arc::clone(&metrics),
+        health: reporter.clone(),
     })
     .max_decoding_message_size(limit)
     .max_encoding_message_size(limit);

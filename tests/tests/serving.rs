@@ -134,6 +134,12 @@ async fn every_rpc_answers_like_the_in_process_evaluator() {
     let outcomes = client.reload_model("").await.unwrap();
     assert_eq!(outcomes.len(), 3);
     assert!(outcomes.iter().all(|o| o.loaded && o.error.is_empty()));
+    // With every version unloaded health turns NOT_SERVING; loading one back makes it SERVING again.
+    assert_eq!(client.unload_model("dubins-test", 0).await.unwrap(), vec![1, 2]);
+    assert_eq!(client.unload_model("di-test", 0).await.unwrap(), vec![1]);
+    assert_eq!(client.health().await.unwrap(), fastrack_client::HealthStatus::NotServing);
+    assert_eq!(client.load_model("di-test", 0).await.unwrap(), vec![1]);
+    assert_eq!(client.health().await.unwrap(), fastrack_client::HealthStatus::Serving);
 
     let status = server.terminate();
     assert!(status.success(), "graceful shutdown exits 0, got {status:?}");

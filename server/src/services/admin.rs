@@ -15,6 +15,8 @@ pub struct Admin {
     pub repository: Arc<Repository>,
     /// Metrics.
     pub metrics: Arc<Metrics>,
+    /// Health, refreshed after every change (NOT_SERVING once nothing is loaded).
+    pub health: tonic_health::server::HealthReporter,
 }
 
 fn version_filter(version: u32) -> Option<u32> {
@@ -92,6 +94,7 @@ impl ModelAdminService for Admin {
         let req = request.into_inner();
         let model = pb::ModelRef { name: req.name.clone(), version: req.version };
         let answer = self.load_one(req).await;
+        crate::refresh_health(&self.health, &self.repository).await;
         observe(&self.metrics, &self.repository, "LoadModel", Some(&model), start, answer)
     }
 
@@ -103,6 +106,7 @@ impl ModelAdminService for Admin {
         let req = request.into_inner();
         let answer = self.unload_one(&req);
         let model = pb::ModelRef { name: req.name, version: req.version };
+        crate::refresh_health(&self.health, &self.repository).await;
         observe(&self.metrics, &self.repository, "UnloadModel", Some(&model), start, answer)
     }
 
@@ -114,6 +118,7 @@ impl ModelAdminService for Admin {
         let name = request.into_inner().name;
         let model = pb::ModelRef { name: name.clone(), version: 0 };
         let answer = self.reload(name).await;
+        crate::refresh_health(&self.health, &self.repository).await;
         observe(&self.metrics, &self.repository, "ReloadModel", Some(&model), start, answer)
     }
 }
