@@ -57,21 +57,67 @@ fn boundary_points(row: &TebRow, n_error: usize, count: usize) -> Result<Vec<f64
 }
 
 impl Safety {
-    /// Resolves the model, validates the batch and evaluates it: the shared path of EvaluateValue and
-    /// TrackingControl.
-    async fn evaluate(
+    fn tracking_error_bound(
         &self,
-        model: Option<&pb::ModelRef>,
-        states: &[f64],
-        params: &[f64],
-        policy: pb::OutOfDomainPolicy,
-        deadline: Option<Instant>,
-    ) -> Result<(u32, BatchResult, ValidBatch), Status> {
-        let model = self.repository.resolve(model)?;
-        let batch = validate::batch(&model, states, params, policy)?;
-        let (result, batch) = self.scheduler.evaluate(&model, batch, deadline).await?;
-        Ok((model.manifest.version, result, batch))
+        req: &pb::GetTrackingErrorBoundRequest,
+    ) -> Result<Response<pb::GetTrackingErrorBoundResponse>, Status> {
+        let model = self.repository.resolve(req.model.as_ref())?;
+        let beta = validate::beta(&model, req.beta)?;
+        if req.boundary_points > MAX_BOUNDARY_POINTS {
+            return Err(Status::invalid_argument(format!(
+                "boundary_points = {}; must be at most {MAX_BOUNDARY_POINTS}",
+                req.boundary_points
+            )));
+        }
+        let row = model.row_for(beta).ok_or_else(|| Status::internal("validated beta has no table row"))?;
+        let n_error = model.manifest.error_coords().len();
+        let boundary = if req.boundary_points == 0 {
+            Vec::new()
+        } else if boundary_directions(n_error, 1).is_empty() {
+            return Err(Status::invalid_argument(format!(
+                "boundary points exist for 1-D and 2-D error spaces; this model's has {n_error} dimensions (ask for boundary_points = 0)"
+            )));
+        } else {
+            boundary_points(row, n_error, req.boundary_points as usize)?
+        };
+        Ok(Response::new(pb::GetTrackingErrorBoundResponse {
+            level: row.served_level(),
+            radius: row.served_level(),
+            extent: row.extent.clone(),
+            table_beta: row.beta,
+            boundary,
+            model_version: model.manifest.version,
+        }))
     }
+
+    /// Resolves the model, validates the batch, evaluates it on the compute pool and records the call: the
+    /// shared path of EvaluateValue and TrackingControl (`respond` builds the reply).
+    async fn evaluate<R>(
+        &self,
+        rpc: &'static str,
+        request: Request<BatchRequest>,
+        respond: impl FnOnce(u32, BatchResult, ValidBatch) -> R,
+    ) -> Result<Response<R>, Status> {
+        let start = Instant::now();
+        let deadline = crate::deadline::from_metadata(request.metadata(), start);
+        let req = request.into_inner();
+        let answer = async {
+            let model = self.repository.resolve(req.model.as_ref())?;
+            let batch = validate::batch(&model, &req.states, &req.params, req.policy)?;
+            let (result, batch) = self.scheduler.evaluate(&model, batch, deadline).await?;
+            Ok(Response::new(respond(model.manifest.version, result, batch)))
+        }
+        .await;
+        observe(&self.metrics, &self.repository, rpc, req.model.as_ref(), start, answer)
+    }
+}
+
+/// The fields EvaluateValue and TrackingControl requests share.
+struct BatchRequest {
+    model: Option<pb::ModelRef>,
+    states: Vec<f64>,
+    params: Vec<f64>,
+    policy: pb::OutOfDomainPolicy,
 }
 
 fn widen(v: &[f32]) -> Vec<f64> {
@@ -115,45 +161,41 @@ impl SafetyService for Safety {
         &self,
         request: Request<pb::EvaluateValueRequest>,
     ) -> Result<Response<pb::EvaluateValueResponse>, Status> {
-        let start = Instant::now();
-        let deadline = crate::deadline::from_metadata(request.metadata(), start);
-        let req = request.into_inner();
-        let answer = self
-            .evaluate(req.model.as_ref(), &req.states, &req.params, req.out_of_domain(), deadline)
-            .await
-            .map(|(model_version, result, batch)| {
-                Response::new(pb::EvaluateValueResponse {
-                    values: widen(&result.outputs.value),
-                    gradients: widen(&result.outputs.grad),
-                    controls: widen(&result.outputs.control),
-                    in_teb: result.in_teb,
-                    in_domain: batch.in_domain,
-                    model_version,
-                })
-            });
-        observe(&self.metrics, &self.repository, "EvaluateValue", req.model.as_ref(), start, answer)
+        let request = request.map(|r| BatchRequest {
+            policy: r.out_of_domain(),
+            model: r.model,
+            states: r.states,
+            params: r.params,
+        });
+        self.evaluate("EvaluateValue", request, |model_version, result, batch| pb::EvaluateValueResponse {
+            values: widen(&result.outputs.value),
+            gradients: widen(&result.outputs.grad),
+            controls: widen(&result.outputs.control),
+            in_teb: result.in_teb,
+            in_domain: batch.in_domain,
+            model_version,
+        })
+        .await
     }
 
     async fn tracking_control(
         &self,
         request: Request<pb::TrackingControlRequest>,
     ) -> Result<Response<pb::TrackingControlResponse>, Status> {
-        let start = Instant::now();
-        let deadline = crate::deadline::from_metadata(request.metadata(), start);
-        let req = request.into_inner();
-        let answer = self
-            .evaluate(req.model.as_ref(), &req.states, &req.params, req.out_of_domain(), deadline)
-            .await
-            .map(|(model_version, result, batch)| {
-                Response::new(pb::TrackingControlResponse {
-                    controls: widen(&result.outputs.control),
-                    values: widen(&result.outputs.value),
-                    in_teb: result.in_teb,
-                    in_domain: batch.in_domain,
-                    model_version,
-                })
-            });
-        observe(&self.metrics, &self.repository, "TrackingControl", req.model.as_ref(), start, answer)
+        let request = request.map(|r| BatchRequest {
+            policy: r.out_of_domain(),
+            model: r.model,
+            states: r.states,
+            params: r.params,
+        });
+        self.evaluate("TrackingControl", request, |model_version, result, batch| pb::TrackingControlResponse {
+            controls: widen(&result.outputs.control),
+            values: widen(&result.outputs.value),
+            in_teb: result.in_teb,
+            in_domain: batch.in_domain,
+            model_version,
+        })
+        .await
     }
 
     type TrackStream = Pin<Box<dyn Stream<Item = Result<pb::TrackResponse, Status>> + Send + 'static>>;
@@ -171,40 +213,5 @@ impl SafetyService for Safety {
         };
         let stream = super::track::open(context, request.into_inner()).await?;
         Ok(Response::new(Box::pin(stream)))
-    }
-}
-
-impl Safety {
-    fn tracking_error_bound(
-        &self,
-        req: &pb::GetTrackingErrorBoundRequest,
-    ) -> Result<Response<pb::GetTrackingErrorBoundResponse>, Status> {
-        let model = self.repository.resolve(req.model.as_ref())?;
-        let beta = validate::beta(&model, req.beta)?;
-        if req.boundary_points > MAX_BOUNDARY_POINTS {
-            return Err(Status::invalid_argument(format!(
-                "boundary_points = {}; must be at most {MAX_BOUNDARY_POINTS}",
-                req.boundary_points
-            )));
-        }
-        let row = model.row_for(beta).ok_or_else(|| Status::internal("validated beta has no table row"))?;
-        let n_error = model.manifest.error_coords().len();
-        let boundary = if req.boundary_points == 0 {
-            Vec::new()
-        } else if boundary_directions(n_error, 1).is_empty() {
-            return Err(Status::invalid_argument(format!(
-                "boundary points exist for 1-D and 2-D error spaces; this model's has {n_error} dimensions (ask for boundary_points = 0)"
-            )));
-        } else {
-            boundary_points(row, n_error, req.boundary_points as usize)?
-        };
-        Ok(Response::new(pb::GetTrackingErrorBoundResponse {
-            level: row.served_level(),
-            radius: row.served_level(),
-            extent: row.extent.clone(),
-            table_beta: row.beta,
-            boundary,
-            model_version: model.manifest.version,
-        }))
     }
 }
