@@ -1,0 +1,87 @@
+//! The trainer's output served by the real server: `fastrack-trainer train` and `export` (the binaries) make a
+//! bundle from a tiny double-integrator run, the server loads it, and its answers equal the manifest's TEB
+//! table and the in-process evaluation of the exported graph.
+
+use fastrack_client::{model_ref, pb};
+use fastrack_e2e::{binary, evaluator_for, TestServer};
+use std::process::Command;
+
+const CONFIG: &str = r#"
+system = "double_integrator"
+parameter_mode = "full"
+seed = 3
+checkpoint_every = 1000
+
+[network]
+hidden = [16, 16]
+omega_0 = 30.0
+output_scale = 1.0
+output_offset = 0.5
+
+[loss]
+form = "exact_boundary"
+lambda = 1.0
+pretrain_iterations = 0
+
+[sampling]
+points = 256
+boundary_share = 0.0
+tau_max = 2.0
+curriculum_iterations = 10
+
+[optimizer]
+iterations = 20
+learning_rate = 1e-3
+final_learning_rate = 1e-4
+gradient_clip_norm = 10.0
+
+[export]
+name = "tiny-di"
+version = 1
+"#;
+
+fn trainer(args: &[&str]) {
+    let output = Command::new(binary("fastrack-trainer")).args(args).output().expect("run fastrack-trainer");
+    assert!(output.status.success(), "fastrack-trainer {args:?} failed:\n{}", String::from_utf8_lossy(&output.stderr));
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_exported_bundle_is_served() {
+    let work = tempfile::tempdir().unwrap();
+    let config = work.path().join("tiny.toml");
+    std::fs::write(&config, CONFIG).unwrap();
+    let run = work.path().join("run");
+    let repo = work.path().join("repo");
+    trainer(&["train", "--config", config.to_str().unwrap(), "--run-dir", run.to_str().unwrap()]);
+    trainer(&["export", "--run-dir", run.to_str().unwrap(), "--out", repo.to_str().unwrap()]);
+    let bundle = repo.join("tiny-di").join("1");
+    let (evaluator, manifest) = evaluator_for(&bundle);
+    assert!(!manifest.untrained, "a trained bundle says so");
+    assert_eq!(manifest.provenance.iterations, 20);
+
+    let (_server, client) = TestServer::start_serving(&repo).await;
+    let info = client.get_model(model_ref("tiny-di", 0)).await.unwrap();
+    assert_eq!((info.name.as_str(), info.version), ("tiny-di", 1));
+    // Every table row is served as written.
+    for row in &manifest.teb_table {
+        let teb = client.tracking_error_bound(model_ref("tiny-di", 1), row.beta, 0).await.unwrap();
+        assert_eq!(teb.level, row.served_level());
+        assert_eq!(teb.table_beta, row.beta);
+    }
+    // Values, gradients and controls equal the exported graph's in-process answers.
+    let states = vec![0.3, -0.2, -1.0, 0.5, 0.0, 0.0];
+    let params = vec![0.6, 0.8, 1.0];
+    let served = client
+        .evaluate_value(model_ref("tiny-di", 1), states.clone(), params.clone(), pb::OutOfDomainPolicy::Reject)
+        .await
+        .unwrap();
+    let s: Vec<f32> = states.iter().map(|&x| x as f32).collect();
+    let p: Vec<f32> = params.iter().map(|&x| x as f32).collect();
+    let local = evaluator.evaluate(&s, &p).unwrap();
+    for (got, want) in served.values.iter().chain(&served.gradients).zip(local.value.iter().chain(&local.grad)) {
+        assert!((got - f64::from(*want)).abs() <= 1e-6 * (1.0 + want.abs() as f64), "{got} vs {want}");
+    }
+    // queryPlannerControl with no obstacle picks the fastest row.
+    let speed = client.query_planner_control(model_ref("tiny-di", 1), None).await.unwrap();
+    assert_eq!(speed.beta_query, manifest.teb_table.last().unwrap().beta);
+}
