@@ -208,10 +208,10 @@ pub struct Settings {
 }
 
 fn positive_seconds(name: &str, value: f64) -> anyhow::Result<Duration> {
-    if !(value.is_finite() && value > 0.0) {
-        bail!("{name} = {value}; must be a positive number of seconds");
+    match Duration::try_from_secs_f64(value) {
+        Ok(duration) if value > 0.0 && value <= 1e9 => Ok(duration),
+        _ => bail!("{name} = {value}; must be a positive number of seconds, at most 1e9"),
     }
-    Ok(Duration::from_secs_f64(value))
 }
 
 fn at_least<T: PartialOrd + std::fmt::Display>(name: &str, value: T, min: T) -> anyhow::Result<T> {
@@ -244,8 +244,8 @@ impl Settings {
     pub fn resolve(o: Options) -> anyhow::Result<Settings> {
         let cores = std::thread::available_parallelism().map(|n| n.get()).unwrap_or(1);
         let poll = o.poll_interval_s.unwrap_or(5.0);
-        if !(poll.is_finite() && poll >= 0.0) {
-            bail!("poll_interval_s = {poll}; must be >= 0 seconds (0 = no polling)");
+        if !(poll.is_finite() && (0.0..=1e9).contains(&poll)) {
+            bail!("poll_interval_s = {poll}; must be between 0 (no polling) and 1e9 seconds");
         }
         let log_format = match o.log_format.as_deref().unwrap_or("text") {
             "text" => LogFormat::Text,
@@ -330,5 +330,7 @@ mod tests {
         assert!(err("tls_cert = \"x.pem\"").contains("given together"));
         assert!(err("no_such_key = 1").contains("unknown field"));
         assert!(err("shutdown_grace_s = 0.0").contains("positive"));
+        assert!(err("stream_idle_timeout_s = 1e300").contains("at most 1e9"));
+        assert!(err("poll_interval_s = 1e300").contains("poll_interval_s"));
     }
 }

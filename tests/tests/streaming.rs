@@ -113,3 +113,16 @@ async fn a_vanished_client_frees_its_stream() {
     let mut session = client.track(model_ref("dubins-test", 0), 0.0).await.unwrap();
     assert!(session.tick(tick(0, 0)).await.unwrap().error.is_none());
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_idle_timeouts_are_refused_at_open() {
+    let repo = tempfile::tempdir().unwrap();
+    write_test_bundle(repo.path(), &dubins4d::system(), "dubins-test", 1, 4);
+    let (server, client) = TestServer::start_observed(repo.path(), &[]).await;
+    for bad in [f64::NAN, f64::INFINITY, -1.0, 1e300] {
+        let e = client.track(model_ref("dubins-test", 0), bad).await.err().expect("refused");
+        assert_eq!(e.code(), Some(tonic::Code::InvalidArgument), "{bad}: {e}");
+        assert!(e.to_string().contains("idle_timeout_s"), "{e}");
+    }
+    assert_eq!(server.metric("fastrack_active_streams").await, 0.0);
+}

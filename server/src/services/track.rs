@@ -15,6 +15,9 @@ use tokio_stream::StreamExt;
 use tonic::{Code, Status, Streaming};
 use tracing::Instrument;
 
+/// Longest idle timeout a stream may ask for (one day).
+pub const MAX_IDLE_TIMEOUT_S: f64 = 86_400.0;
+
 /// What a stream needs from the server.
 pub struct StreamContext {
     /// Model lookup at `open`.
@@ -66,9 +69,9 @@ pub async fn open(
             None => return Err(Status::cancelled("stream closed before `open`")),
         };
         let model = context.repository.resolve(open.model.as_ref())?;
-        if !(open.idle_timeout_s.is_finite() && open.idle_timeout_s >= 0.0) {
+        if !(open.idle_timeout_s.is_finite() && (0.0..=MAX_IDLE_TIMEOUT_S).contains(&open.idle_timeout_s)) {
             return Err(Status::invalid_argument(format!(
-                "idle_timeout_s = {}; must be finite and >= 0",
+                "idle_timeout_s = {}; must be between 0 (the server's default) and {MAX_IDLE_TIMEOUT_S} seconds",
                 open.idle_timeout_s
             )));
         }
