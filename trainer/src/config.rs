@@ -16,6 +16,42 @@ pub enum LossForm {
     ExactBoundary,
 }
 
+/// Which residual of the HJI variational inequality is minimised.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum Residual {
+    /// DeepReach's differential form `min(V - l, dV/dtau - H(r, dV/dr))`. It also vanishes almost
+    /// everywhere on functions other than the viscosity solution (on a flat plateau `dV/dr = 0`, so `H = 0`
+    /// and `dV/dtau = 0` satisfy it), and training can settle on one.
+    #[default]
+    Differential,
+    /// The semi-Lagrangian (dynamic-programming) step
+    /// `(V(r, tau) - max{l(r), min_u max_{u_p, d} V(r + h r'(u, u_p, d), tau - h)}) / dt`, `h = min(dt, tau)`,
+    /// over the vertices of the input boxes: a monotone scheme, so the value it is consistent with is the
+    /// viscosity solution (to `O(dt)`). Uses values only, no input gradient. On the double integrator it
+    /// fitted no better than the differential form (the network's error, not the scheme's, dominates).
+    SemiLagrangian,
+}
+
+fn default_time_step() -> f64 {
+    0.05
+}
+
+fn default_causal_epsilon() -> f64 {
+    1.0
+}
+
+/// How pointwise residuals are averaged into the loss.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum ResidualNorm {
+    /// Mean absolute residual (DeepReach's).
+    #[default]
+    L1,
+    /// Mean squared residual: large, localised violations (a wrong kink) cost more.
+    L2,
+}
+
 /// How the planner bounds enter the network.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "snake_case")]
@@ -62,6 +98,15 @@ pub struct NetworkConfig {
     pub output_scale: f64,
     /// Output offset added after scaling.
     pub output_offset: f64,
+    /// Multiplies the first layer's initial weights (default 1): the first layer's frequency becomes
+    /// `first_layer_scale * omega_0` at initialisation, for value functions with features finer than SIREN's
+    /// default initialisation resolves (the exported network keeps one `omega_0`).
+    #[serde(default = "default_first_layer_scale")]
+    pub first_layer_scale: f64,
+}
+
+fn default_first_layer_scale() -> f64 {
+    1.0
 }
 
 /// Loss.
@@ -74,6 +119,24 @@ pub struct LossConfig {
     pub lambda: f64,
     /// Boundary-only iterations before the residual enters (paper form).
     pub pretrain_iterations: u64,
+    /// Which residual (default `differential`).
+    #[serde(default)]
+    pub residual: Residual,
+    /// How residuals are averaged (default `l1`).
+    #[serde(default)]
+    pub norm: ResidualNorm,
+    /// Time step `dt` (s) of the semi-Lagrangian residual (default 0.05); unused by the differential one.
+    #[serde(default = "default_time_step")]
+    pub time_step: f64,
+    /// Causal training (Wang, Sankaran & Perdikaris 2022): the sampled horizon is split into this many
+    /// equal bins and each bin's residual is weighted by `exp(-causal_epsilon * sum of the mean residuals of
+    /// the earlier bins)` (weights held constant in the gradient), so later horizons are fitted once earlier
+    /// ones are. 0 (the default) turns it off.
+    #[serde(default)]
+    pub causal_bins: usize,
+    /// Causal weighting strength `epsilon` (default 1).
+    #[serde(default = "default_causal_epsilon")]
+    pub causal_epsilon: f64,
 }
 
 /// Collocation points.
@@ -88,6 +151,27 @@ pub struct SamplingConfig {
     pub tau_max: f64,
     /// Iterations over which the sampled horizon grows linearly from 0 to `tau_max` (after pretraining).
     pub curriculum_iterations: u64,
+    /// Share of the points (after the `tau = 0` ones) whose state is drawn from the domain shrunk by
+    /// `focus_scale` about its centre (periodic coordinates keep their full period), where the value's
+    /// minimum, the tracking error bound, lies. Default 0.
+    #[serde(default)]
+    pub focus_share: f64,
+    /// Shrink factor of the focus box, in `(0, 1]` (default 0.5).
+    #[serde(default = "default_focus_scale")]
+    pub focus_scale: f64,
+    /// Horizons are drawn as `tau_limit * u^tau_exponent`, `u` uniform in `[0, 1)`: 1 (the default) is
+    /// uniform; above 1 crowds points at short horizons, where the value changes fastest and whose errors
+    /// every longer horizon inherits.
+    #[serde(default = "default_tau_exponent")]
+    pub tau_exponent: f64,
+}
+
+fn default_tau_exponent() -> f64 {
+    1.0
+}
+
+fn default_focus_scale() -> f64 {
+    0.5
 }
 
 /// Adam and its schedule.
@@ -145,12 +229,19 @@ impl TrainConfig {
             "network.output_scale must be finite and non-zero"
         );
         ensure!(n.output_offset.is_finite(), "network.output_offset must be finite");
+        ensure!(n.first_layer_scale.is_finite() && n.first_layer_scale > 0.0, "network.first_layer_scale must be > 0");
         let l = &self.loss;
         ensure!(l.lambda.is_finite() && l.lambda > 0.0, "loss.lambda must be > 0");
+        ensure!(l.time_step.is_finite() && l.time_step > 0.0, "loss.time_step must be > 0");
+        ensure!(l.causal_epsilon.is_finite() && l.causal_epsilon >= 0.0, "loss.causal_epsilon must be >= 0");
         let s = &self.sampling;
         ensure!(s.points >= 2, "sampling.points must be at least 2");
         ensure!((0.0..1.0).contains(&s.boundary_share), "sampling.boundary_share must be in [0, 1)");
         ensure!(s.tau_max.is_finite() && s.tau_max > 0.0, "sampling.tau_max must be > 0");
+        ensure!(l.time_step < s.tau_max, "loss.time_step must be below sampling.tau_max");
+        ensure!((0.0..=1.0).contains(&s.focus_share), "sampling.focus_share must be in [0, 1]");
+        ensure!(s.focus_scale > 0.0 && s.focus_scale <= 1.0, "sampling.focus_scale must be in (0, 1]");
+        ensure!(s.tau_exponent.is_finite() && s.tau_exponent > 0.0, "sampling.tau_exponent must be > 0");
         if l.form == LossForm::Paper && s.boundary_share * (s.points as f64) < 1.0 {
             bail!("the paper loss needs boundary points: sampling.boundary_share * sampling.points must be >= 1");
         }

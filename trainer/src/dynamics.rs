@@ -29,6 +29,11 @@ fn row(values: impl Iterator<Item = f64>, device: &Device) -> Tensor<2> {
     Tensor::from_data(TensorData::new(v, [1, n]), device)
 }
 
+/// Every sign pattern of `{-1, 1}^n`.
+fn sign_vertices(n: usize) -> Vec<Vec<f64>> {
+    (0..1usize << n).map(|k| (0..n).map(|i| if (k >> i) & 1 == 1 { 1.0 } else { -1.0 }).collect()).collect()
+}
+
 fn column(r: &Tensor<2>, j: usize) -> Tensor<2> {
     r.clone().narrow(1, j, 1)
 }
@@ -101,6 +106,39 @@ impl TensorDynamics {
             h = h + (c.clone().mul(mid.clone()) + c.abs().mul(half.clone())).sum_dim(1);
         }
         h
+    }
+
+    /// `r'(r, u, u_p, d)` `[N, n_state]` at every vertex of the input boxes: the outer list runs over the
+    /// tracker's control vertices, the inner one over the planner's and the disturbance's vertices jointly.
+    pub fn vertex_velocities(&self, r: &Tensor<2>, params: &Tensor<2>) -> Vec<Vec<Tensor<2>>> {
+        let device = r.device();
+        let drift = self.drift(r);
+        let betas = params.clone().matmul(self.planner_param_select.clone());
+        let box_vertices = |mid: &Tensor<2>, half: &Tensor<2>, g: &Tensor<2>| -> Vec<Tensor<2>> {
+            sign_vertices(mid.dims()[1])
+                .into_iter()
+                .map(|signs| {
+                    let input = mid.clone() + half.clone().mul(row(signs.into_iter(), &device));
+                    input.matmul(g.clone().transpose())
+                })
+                .collect()
+        };
+        let controls = box_vertices(&self.control_mid, &self.control_half, &self.g_control);
+        let planner: Vec<Tensor<2>> = sign_vertices(betas.dims()[1])
+            .into_iter()
+            .map(|signs| betas.clone().mul(row(signs.into_iter(), &device)).matmul(self.g_planner.clone().transpose()))
+            .collect();
+        let disturbances = match &self.g_disturbance {
+            Some((g, mid, half)) => box_vertices(mid, half, g),
+            None => vec![Tensor::zeros([1, self.n_state], &device)],
+        };
+        controls
+            .iter()
+            .map(|c| {
+                let base = drift.clone() + c.clone();
+                planner.iter().flat_map(|p| disturbances.iter().map(|d| base.clone() + p.clone() + d.clone())).collect()
+            })
+            .collect()
     }
 
     /// Tracking error `l(r)` `[N, 1]` and its gradient `[N, n_state]` (zero at `e = 0`).

@@ -2,6 +2,7 @@
 //! their export as served, validated model bundles.
 
 pub mod bench;
+pub mod causal;
 pub mod config;
 pub mod dynamics;
 pub mod export;

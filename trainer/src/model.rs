@@ -64,6 +64,15 @@ impl Siren {
         }
     }
 
+    /// `y` alone for normalised inputs `x` `[N, n_in]` (no input gradient).
+    pub fn output(&self, x: Tensor<2>, omega_0: f64) -> Tensor<2> {
+        let last = self.weights.len() - 1;
+        let h = (0..last).fold(x, |h, k| {
+            (h.matmul(self.weights[k].val()) + self.biases[k].val().unsqueeze::<2>()).mul_scalar(omega_0).sin()
+        });
+        h.matmul(self.weights[last].val()) + self.biases[last].val().unsqueeze::<2>()
+    }
+
     /// `y` and `dy/dx` for normalised inputs `x` `[N, n_in]`: forward through `sin(omega_0 (x W + b))`
     /// layers, then the backward pass `g = W_L^T; g = (omega_0 cos(omega_0 z_k) * g) W_k^T` as tensor ops,
     /// so autodiff can differentiate the loss through both.

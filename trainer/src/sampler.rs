@@ -18,6 +18,8 @@ pub struct Batch {
     pub input: Tensor<2>,
     /// The first `n_boundary` rows have `tau = 0`.
     pub n_boundary: usize,
+    /// Largest horizon the batch was drawn with.
+    pub tau_limit: f64,
 }
 
 /// Draws batches for a system.
@@ -27,6 +29,9 @@ pub struct Sampler {
     points: usize,
     n_boundary: usize,
     seed: u64,
+    focus_share: f64,
+    focus_scale: f64,
+    tau_exponent: f64,
 }
 
 impl Sampler {
@@ -39,7 +44,28 @@ impl Sampler {
         seed: u64,
     ) -> Self {
         let n_boundary = (boundary_share * points as f64).round() as usize;
-        Self { system: system.clone(), normalization, points, n_boundary, seed }
+        Self {
+            system: system.clone(),
+            normalization,
+            points,
+            n_boundary,
+            seed,
+            focus_share: 0.0,
+            focus_scale: 1.0,
+            tau_exponent: 1.0,
+        }
+    }
+
+    /// Draws horizons as `tau_limit * u^exponent` (`u` uniform), crowding them at short horizons when
+    /// `exponent > 1`.
+    pub fn with_tau_exponent(self, exponent: f64) -> Self {
+        Self { tau_exponent: exponent, ..self }
+    }
+
+    /// Draws `share` of the points (after the `tau = 0` ones) from the state domain shrunk by `scale` about
+    /// its centre; periodic coordinates keep their full period.
+    pub fn with_focus(self, share: f64, scale: f64) -> Self {
+        Self { focus_share: share, focus_scale: scale, ..self }
     }
 
     /// The batch of `iteration`, with horizons drawn from `[0, tau_limit]`.
@@ -52,9 +78,24 @@ impl Sampler {
         let mut params = Vec::with_capacity(n * np);
         let mut input = Vec::with_capacity(n * (1 + ns + np));
         let (c, s) = (&self.normalization.center, &self.normalization.half_range);
+        let n_focus = (self.focus_share * (n - self.n_boundary) as f64).round() as usize;
         for i in 0..n {
-            let t = if i < self.n_boundary || tau_limit <= 0.0 { 0.0 } else { rng.random_range(0.0..tau_limit) };
-            let r: Vec<f64> = self.system.state.iter().map(|d| rng.random_range(d.min..d.max)).collect();
+            let t = if i < self.n_boundary || tau_limit <= 0.0 {
+                0.0
+            } else {
+                tau_limit * rng.random_range(0.0..1.0f64).powf(self.tau_exponent)
+            };
+            let scale = if i >= n - n_focus { self.focus_scale } else { 1.0 };
+            let r: Vec<f64> = self
+                .system
+                .state
+                .iter()
+                .map(|d| {
+                    let (mid, half) = (0.5 * (d.min + d.max), 0.5 * (d.max - d.min));
+                    let half = if d.periodic { half } else { half * scale };
+                    rng.random_range(mid - half..mid + half)
+                })
+                .collect();
             let p: Vec<f64> = self.system.params.iter().map(|d| rng.random_range(d.min..=d.max)).collect();
             tau.push(t as f32);
             input.push(((t - c[0]) / s[0]) as f32);
@@ -74,6 +115,7 @@ impl Sampler {
             params: t2(params, np),
             input: t2(input, 1 + ns + np),
             n_boundary: self.n_boundary,
+            tau_limit,
         }
     }
 }

@@ -75,6 +75,7 @@ pub fn initial_network(config: &TrainConfig, system: &AffineSystem) -> ValueNetw
     );
     network.output_scale = config.network.output_scale;
     network.output_offset = config.network.output_offset;
+    network.layers[0].weight.iter_mut().for_each(|w| *w *= config.network.first_layer_scale);
     network
 }
 
@@ -147,7 +148,9 @@ pub fn train(config: &TrainConfig, device: &Device, session: Session<'_>) -> any
         config.sampling.points,
         config.sampling.boundary_share,
         config.seed,
-    );
+    )
+    .with_focus(config.sampling.focus_share, config.sampling.focus_scale)
+    .with_tau_exponent(config.sampling.tau_exponent);
     let total = config.optimizer.iterations;
     let end = session.max_iterations.map_or(total, |m| (state.iteration + m).min(total));
     let bar = if session.progress { indicatif::ProgressBar::new(total) } else { indicatif::ProgressBar::hidden() };

@@ -30,13 +30,21 @@ fn shipped_configs_are_valid() {
 fn bad_configs_name_what_is_wrong() {
     let cases = [
         ("system = \"double_integrator\"", "system = \"unicycle\"", "unknown system \"unicycle\""),
-        ("hidden = [64, 64]", "hidden = [64, 0]", "network.hidden widths must be > 0"),
-        ("hidden = [64, 64]", "hidden = []", "network.hidden must list at least one layer"),
-        ("tau_max = 8.0", "tau_max = 0.0", "sampling.tau_max must be > 0"),
+        ("hidden = [64, 64, 64]", "hidden = [64, 0]", "network.hidden widths must be > 0"),
+        ("hidden = [64, 64, 64]", "hidden = []", "network.hidden must list at least one layer"),
+        ("tau_max = 6.0", "tau_max = 0.0", "sampling.tau_max must be > 0"),
         ("points = 4000", "points = 0", "sampling.points must be at least 2"),
         ("iterations = 3000", "iterations = 0", "optimizer.iterations must be > 0"),
         ("learning_rate = 1e-3", "learning_rate = -1e-3", "learning rates must be > 0"),
         ("omega_0 = 30.0", "omega_0 = 30.0\ncolour = 3", "unknown field `colour`"),
+        ("time_step = 0.05", "time_step = 0.0", "loss.time_step must be > 0"),
+        ("time_step = 0.05", "time_step = 7.0", "loss.time_step must be below sampling.tau_max"),
+        ("causal_epsilon = 1.0", "causal_epsilon = -1.0", "loss.causal_epsilon must be >= 0"),
+        ("norm = \"l2\"", "norm = \"l3\"", "unknown variant `l3`"),
+        ("tau_exponent = 2.0", "tau_exponent = 0.0", "sampling.tau_exponent must be > 0"),
+        ("focus_share = 0.0", "focus_share = 2.0", "sampling.focus_share must be in [0, 1]"),
+        ("focus_scale = 0.5", "focus_scale = 0.0", "sampling.focus_scale must be in (0, 1]"),
+        ("first_layer_scale = 1.0", "first_layer_scale = 0.0", "network.first_layer_scale must be > 0"),
     ];
     let base = base_text();
     for (from, to, expected) in cases {

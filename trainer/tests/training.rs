@@ -110,3 +110,58 @@ fn tensor_hamiltonian_equals_the_f64_hamiltonian() {
         }
     }
 }
+
+#[test]
+fn vertex_velocities_give_the_hamiltonian() {
+    use fastrack_trainer::dynamics::TensorDynamics;
+    let device = Device::flex();
+    for system in [dubins4d::system(), dubins4d::system().with_shared_parameter(), double_integrator::system()] {
+        let dynamics = TensorDynamics::new(&system, &device);
+        let mut rng = rand::rngs::StdRng::seed_from_u64(22);
+        let n = 128;
+        let (ns, np) = (system.n_state(), system.n_params());
+        let r: Vec<f32> = (0..n)
+            .flat_map(|_| system.state.iter().map(|d| rng.random_range(d.min..d.max) as f32).collect::<Vec<_>>())
+            .collect();
+        let p: Vec<f32> = (0..n * ns).map(|_| rng.random_range(-2.0f32..2.0)).collect();
+        let b: Vec<f32> = (0..n)
+            .flat_map(|_| system.params.iter().map(|d| rng.random_range(d.min..d.max) as f32).collect::<Vec<_>>())
+            .collect();
+        let t = |v: Vec<f32>, cols: usize| Tensor::<2>::from_data(TensorData::new(v, [n, cols]), &device);
+        let (r, p, b) = (t(r, ns), t(p, ns), t(b, np));
+        // min over control vertices of max over opponent vertices of p . r' is H for an affine system.
+        let h_vertices = dynamics
+            .vertex_velocities(&r, &b)
+            .into_iter()
+            .map(|group| group.into_iter().map(|v| p.clone().mul(v).sum_dim(1)).reduce(|x, y| x.max_pair(y)).unwrap())
+            .reduce(|x, y| x.min_pair(y))
+            .unwrap();
+        let gap: f32 = (h_vertices - dynamics.hamiltonian(&r, &p, &b)).abs().max().into_scalar();
+        assert!(gap < 1e-4, "{}: vertex Hamiltonian differs by {gap:e}", system.id);
+    }
+}
+
+#[test]
+fn semi_lagrangian_residual_tends_to_the_differential_one() {
+    use fastrack_trainer::config::{LossForm, Residual};
+    let device = device();
+    let mut config = config("configs/double_integrator.toml");
+    // A smooth network whose value stays well above l, so that both residuals are dV/dtau - H.
+    config.loss.form = LossForm::Paper;
+    config.network.omega_0 = 3.0;
+    config.network.output_offset = 10.0;
+    config.loss.time_step = 1e-3;
+    let system = config.system().unwrap();
+    let network = initial_network(&config, &system);
+    let model = Siren::from_network(&network, &device);
+    let batch = Sampler::new(&system, network.input.clone(), 2048, 1e-3, 5).batch(0, 2.0, &device);
+    let mut residual = |kind| {
+        config.loss.residual = kind;
+        Objective::new(&config, &system, &network.input, &device).loss(&model, &batch, 0).1.residual
+    };
+    let (differential, semi_lagrangian) = (residual(Residual::Differential), residual(Residual::SemiLagrangian));
+    assert!(
+        (semi_lagrangian - differential).abs() < 0.02 * differential,
+        "semi-Lagrangian {semi_lagrangian} vs differential {differential}"
+    );
+}
