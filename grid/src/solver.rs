@@ -1,5 +1,10 @@
 //! The tracking value iteration: from `V(r, 0) = l(r)`, step `dV/dtau = H` with `V <- max(V, l)` until the
 //! largest change per unit horizon falls below a tolerance (converged) or the horizon cap is reached.
+//!
+//! The largest change is taken over the whole grid by default, or over a sublevel set near `V_min` away from
+//! the non-periodic edges ([`ConvergenceSet`]): under optimal play trajectories never leave a sublevel set of
+//! the tracking value (`V(r) = max(l(r), V(r(t)))`), so values outside it do not feed into it, and the rate
+//! there measures whether the TEB and its error set have settled.
 
 use crate::grid::Grid;
 use crate::hamiltonian::Hamiltonian;
@@ -23,11 +28,39 @@ pub struct SolverConfig {
     pub cfl: f64,
     /// Largest horizon integrated (s).
     pub horizon_cap: f64,
-    /// Converged once `max |dV/dtau|` over the grid is below this (value units per second).
+    /// Converged once `max |dV/dtau|` over the grid (or over `converge_on`) is below this (value units per
+    /// second) for `settle_time`.
     pub tolerance: f64,
     /// Apply the tracking obstacle `V <- max(V, l)` after every stage; `false` integrates the plain
     /// terminal-cost equation (only useful to show what the obstacle does).
     pub tracking: bool,
+    /// Where the convergence test measures `max |dV/dtau|`: `None` (the default) over every node, else over
+    /// this set.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub converge_on: Option<ConvergenceSet>,
+    /// Horizon (s) over which the rate must stay below the tolerance; 0 (the default) stops at the first step
+    /// below it.
+    #[serde(default, skip_serializing_if = "is_zero")]
+    pub settle_time: f64,
+}
+
+fn is_zero(x: &f64) -> bool {
+    *x == 0.0
+}
+
+/// The nodes a restricted convergence test looks at: `{V <= V_min + margin |V_min|}` (values after the step)
+/// at least `edge_nodes` nodes from every non-periodic edge.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct ConvergenceSet {
+    /// Relative margin of the sublevel set above `V_min`.
+    pub margin: f64,
+    /// Nodes left out next to each non-periodic edge (where extrapolated ghost nodes feed the stencils).
+    pub edge_nodes: usize,
+}
+
+impl ConvergenceSet {
+    /// The set the history's diagnostics use when the test runs over the whole grid.
+    pub const DIAGNOSTIC: ConvergenceSet = ConvergenceSet { margin: 0.5, edge_nodes: 3 };
 }
 
 impl Default for SolverConfig {
@@ -39,6 +72,8 @@ impl Default for SolverConfig {
             horizon_cap: 30.0,
             tolerance: 1e-3,
             tracking: true,
+            converge_on: None,
+            settle_time: 0.0,
         }
     }
 }
@@ -80,6 +115,76 @@ pub struct HistoryPoint {
     pub v_min: f64,
     /// `max |dV/dtau|` over the grid in the last step (none at `tau = 0`).
     pub rate: Option<f64>,
+    /// The same rate by region (none at `tau = 0` and in files written before regions were recorded).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub regions: Option<RegionRates>,
+}
+
+/// `max |dV/dtau|` of one step by region, and where the largest change over the grid happened.
+#[derive(Debug, Clone, Copy, PartialEq, Serialize, Deserialize)]
+pub struct RegionRates {
+    /// Over nodes at least the set's `edge_nodes` from every non-periodic edge.
+    pub interior: f64,
+    /// Over the convergence set (the solve's [`ConvergenceSet`], or [`ConvergenceSet::DIAGNOSTIC`]).
+    pub set: f64,
+    /// Over the nodes of the sublevel set `{V <= V_min + margin |V_min|}` that are outside the interior.
+    pub set_edge: f64,
+    /// Distance in nodes from the node of the largest change over the grid to the nearest non-periodic edge.
+    pub worst_edge_distance: usize,
+    /// `V - V_min` at that node.
+    pub worst_excess: f64,
+}
+
+/// Rates by region of a step of length `dt` from `before` to `after`, the set taken at `after`'s minimum.
+pub fn region_rates(grid: &Grid, before: &[f64], after: &[f64], dt: f64, set: ConvergenceSet) -> RegionRates {
+    let v_min = after.par_iter().copied().reduce(|| f64::INFINITY, f64::min);
+    let level = v_min + set.margin * v_min.abs();
+    let edge_distance = |flat: usize| {
+        grid.axes()
+            .iter()
+            .enumerate()
+            .filter(|(_, a)| !a.periodic)
+            .map(|(k, a)| {
+                let i = grid.node(flat, k);
+                i.min(a.n - 1 - i)
+            })
+            .min()
+            .unwrap_or(usize::MAX)
+    };
+    // (interior, set, set_edge, worst change, its flat index)
+    let zero = || (0.0f64, 0.0f64, 0.0f64, -1.0f64, 0usize);
+    let (interior, inside, outside, _, worst) = (0..after.len())
+        .into_par_iter()
+        .fold(zero, |mut acc, flat| {
+            let change = (after[flat] - before[flat]).abs();
+            let is_interior = edge_distance(flat) >= set.edge_nodes;
+            if is_interior {
+                acc.0 = acc.0.max(change);
+            }
+            if after[flat] <= level {
+                if is_interior {
+                    acc.1 = acc.1.max(change);
+                } else {
+                    acc.2 = acc.2.max(change);
+                }
+            }
+            if change > acc.3 {
+                acc.3 = change;
+                acc.4 = flat;
+            }
+            acc
+        })
+        .reduce(zero, |x, y| {
+            let (c, f) = if y.3 > x.3 { (y.3, y.4) } else { (x.3, x.4) };
+            (x.0.max(y.0), x.1.max(y.1), x.2.max(y.2), c, f)
+        });
+    RegionRates {
+        interior: interior / dt,
+        set: inside / dt,
+        set_edge: outside / dt,
+        worst_edge_distance: edge_distance(worst),
+        worst_excess: after.get(worst).map_or(0.0, |v| v - v_min),
+    }
 }
 
 /// How a solve went.
@@ -99,7 +204,7 @@ pub struct SolveInfo {
     pub steps: usize,
     /// Time step (s).
     pub dt: f64,
-    /// Last `max |dV/dtau|`.
+    /// Last `max |dV/dtau|` over the grid.
     pub final_rate: f64,
     /// Wall time (s).
     pub wall_s: f64,
@@ -135,6 +240,14 @@ fn check(system: &AffineSystem, params: &[f64], grid: &Grid, config: &SolverConf
     positive("cfl", config.cfl)?;
     positive("horizon cap", config.horizon_cap)?;
     positive("tolerance", config.tolerance)?;
+    if !(config.settle_time.is_finite() && config.settle_time >= 0.0) {
+        return Err(SolveError::Setting(format!("settle time must be >= 0, got {}", config.settle_time)));
+    }
+    if let Some(set) = config.converge_on {
+        if !(set.margin.is_finite() && set.margin >= 0.0) {
+            return Err(SolveError::Setting(format!("convergence set margin must be >= 0, got {}", set.margin)));
+        }
+    }
     if params.iter().any(|p| !p.is_finite()) {
         return Err(SolveError::Setting(format!("parameters must be finite, got {params:?}")));
     }
@@ -221,20 +334,40 @@ pub fn solve(
     let dt = scheme.cfl_step(config.cfl);
     let mut values = l.clone();
     let mut work = Workspace::new(grid.num_points());
+    let mut before = vec![0.0; grid.num_points()];
+    let set = config.converge_on.unwrap_or(ConvergenceSet::DIAGNOSTIC);
     let bar = progress_bar(progress, config.horizon_cap);
     let (mut tau, mut steps, mut rate, mut converged) = (0.0, 0usize, f64::INFINITY, false);
-    let mut history =
-        vec![HistoryPoint { tau: 0.0, v_min: values.iter().copied().fold(f64::INFINITY, f64::min), rate: None }];
+    let mut below_since: Option<f64> = None;
+    let mut history = vec![HistoryPoint {
+        tau: 0.0,
+        v_min: values.iter().copied().fold(f64::INFINITY, f64::min),
+        rate: None,
+        regions: None,
+    }];
     let record_every = (0.1 / dt).ceil().max(1.0) as usize;
     while tau < config.horizon_cap {
         let h = dt.min(config.horizon_cap - tau);
+        // Rates by region need the values before the step: every step for a restricted test, else when the
+        // history records this step.
+        let by_region = config.converge_on.is_some() || (steps + 1) % record_every == 0;
+        if by_region {
+            before.copy_from_slice(&values);
+        }
         let summary = step(&scheme, config.rk, h, &mut values, &mut work);
         tau += h;
         steps += 1;
         rate = summary.max_change / h;
-        converged = rate < config.tolerance;
-        if steps % record_every == 0 || converged {
-            history.push(HistoryPoint { tau, v_min: summary.min_value, rate: Some(rate) });
+        let regions = by_region.then(|| region_rates(grid, &before, &values, h, set));
+        let tested = match (config.converge_on, regions) {
+            (Some(_), Some(r)) => r.set,
+            _ => rate,
+        };
+        // Horizon at which the rate last went below the tolerance (before this step when it is still below).
+        below_since = if tested < config.tolerance { below_since.or(Some(tau - h)) } else { None };
+        converged = below_since.is_some_and(|t0| tau - t0 >= config.settle_time);
+        if steps % record_every == 0 || converged || tau >= config.horizon_cap {
+            history.push(HistoryPoint { tau, v_min: summary.min_value, rate: Some(rate), regions });
             bar.set_position((tau * 1000.0) as u64);
             bar.set_message(format!("{tau:.2} s  V_min {:.4}  max|dV/dtau| {rate:.2e}", summary.min_value));
             tracing::debug!(tau, v_min = summary.min_value, rate, "step");
@@ -257,4 +390,30 @@ pub fn solve(
         history,
     };
     Ok(Solution { grid: grid.clone(), values, info })
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::grid::Axis;
+
+    #[test]
+    fn region_rates_split_the_change_by_edge_distance_and_sublevel_set() {
+        let axis = |periodic| Axis { name: "x".into(), min: 0.0, max: 1.0, n: 8, periodic };
+        let grid = Grid::new(vec![axis(false), axis(true)]).unwrap();
+        let before = vec![1.0; 64];
+        let mut after = vec![2.0; 64];
+        // V_min 1 at node (4, 0); the set {V <= 1.5} holds it and node (0, 3) on the non-periodic edge.
+        after[4 * 8] = 1.0;
+        after[3] = 1.5;
+        // The largest change: node (3, 5), 3 nodes from the edge, outside the set.
+        after[3 * 8 + 5] = 5.0;
+        let set = ConvergenceSet { margin: 0.5, edge_nodes: 2 };
+        let r = region_rates(&grid, &before, &after, 0.5, set);
+        assert_eq!(r.interior, 8.0);
+        assert_eq!(r.set, 0.0);
+        assert_eq!(r.set_edge, 1.0);
+        assert_eq!(r.worst_edge_distance, 3);
+        assert_eq!(r.worst_excess, 4.0);
+    }
 }

@@ -3,7 +3,7 @@
 use anyhow::{bail, Context};
 use fastrack_grid::grid::{Axis, Grid};
 use fastrack_grid::integrate::RkOrder;
-use fastrack_grid::solver::SolverConfig;
+use fastrack_grid::solver::{ConvergenceSet, SolverConfig};
 use fastrack_grid::upwind::Accuracy;
 use fastrack_valuefn::system::{by_id, AffineSystem, SYSTEM_IDS};
 
@@ -31,9 +31,22 @@ pub struct SolveOptions {
     /// Largest horizon integrated (s).
     #[arg(long, default_value_t = 30.0)]
     pub horizon_cap: f64,
-    /// Converged when max |dV/dtau| over the grid falls below this (m/s).
+    /// Converged when max |dV/dtau| over the grid (or the --converge-on set) falls below this (m/s).
     #[arg(long, default_value_t = 0.01)]
     pub tolerance: f64,
+    /// Where the convergence test looks: `grid` (every node) or `sublevel` ({V <= V_min (1 + --set-margin)}
+    /// at least --edge-nodes nodes from every non-periodic edge).
+    #[arg(long, default_value = "grid", value_parser = ["grid", "sublevel"])]
+    pub converge_on: String,
+    /// Relative margin of the sublevel convergence set above V_min.
+    #[arg(long, default_value_t = ConvergenceSet::DIAGNOSTIC.margin)]
+    pub set_margin: f64,
+    /// Converged only once the rate has stayed below --tolerance for this long (s); 0 stops at the first step.
+    #[arg(long, default_value_t = 0.0)]
+    pub settle_time: f64,
+    /// Nodes left out of the sublevel convergence set next to each non-periodic edge.
+    #[arg(long, default_value_t = ConvergenceSet::DIAGNOSTIC.edge_nodes)]
+    pub edge_nodes: usize,
 }
 
 impl SolveOptions {
@@ -52,6 +65,9 @@ impl SolveOptions {
             horizon_cap: self.horizon_cap,
             tolerance: self.tolerance,
             tracking: true,
+            converge_on: (self.converge_on == "sublevel")
+                .then_some(ConvergenceSet { margin: self.set_margin, edge_nodes: self.edge_nodes }),
+            settle_time: self.settle_time,
         }
     }
 

@@ -3,6 +3,7 @@
 mod bench;
 mod common;
 mod compare;
+mod horizon;
 mod solve;
 mod table;
 mod verify;
@@ -28,6 +29,9 @@ enum Command {
     /// TEB table over beta (classic FaSTrack bound at beta_u, Meta-FaSTrack levels) across resolutions and
     /// accuracies, with V_min-vs-horizon and V_min-vs-resolution plots and a record under bench/results/.
     Table(table::Args),
+    /// V_min and max |dV/dtau| by region (grid, interior, sublevel set) against the horizon, across resolutions
+    /// and beta, with the horizon at which the sublevel-set rate settles; plots and a record.
+    Horizon(horizon::Args),
     /// A model bundle against grid solutions: learned vs grid V_min per beta, errors of V over the grid's
     /// sublevel set, PNG slices of both value functions through the grid's minimiser.
     Compare(compare::Args),
@@ -43,6 +47,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Solve(args) => solve::run(args),
         Command::Table(args) => table::run(args),
+        Command::Horizon(args) => horizon::run(args),
         Command::Compare(args) => compare::run(args),
         Command::Verify(args) => verify::run(args),
         Command::Bench(args) => bench::run(args),

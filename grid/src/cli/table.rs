@@ -50,8 +50,16 @@ struct Entry {
 pub fn solution_path(dir: &Path, system: &str, beta: f64, resolution: &[usize], options: &SolveOptions) -> PathBuf {
     let res = resolution.iter().map(|n| n.to_string()).collect::<Vec<_>>().join("x");
     let bounds = if options.bounds.is_empty() { String::new() } else { format!("-{}", options.bounds.join("_")) };
+    let config = options.config();
+    let mut set = match config.converge_on {
+        Some(set) => format!("-set{}e{}", set.margin, set.edge_nodes),
+        None => String::new(),
+    };
+    if config.settle_time > 0.0 {
+        set += &format!("-settle{}", config.settle_time);
+    }
     dir.join(format!(
-        "{system}-beta{beta}-n{res}-{}-rk{}-tol{}-cap{}{}.ftgrid",
+        "{system}-beta{beta}-n{res}-{}-rk{}-tol{}-cap{}{set}{}.ftgrid",
         options.accuracy,
         options.rk,
         options.tolerance,
