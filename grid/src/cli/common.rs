@@ -6,6 +6,22 @@ use fastrack_grid::integrate::RkOrder;
 use fastrack_grid::solver::{ConvergenceSet, SolverConfig};
 use fastrack_grid::upwind::Accuracy;
 use fastrack_valuefn::system::{by_id, AffineSystem, SYSTEM_IDS};
+use std::path::PathBuf;
+
+/// Where solutions are cached and measurement records written.
+#[derive(clap::Args, Clone, Debug)]
+pub struct StudyOutputs {
+    /// Folder of solution files: solutions found there with the same settings are reused, new ones saved.
+    #[arg(long, default_value = "target/grid-solutions")]
+    pub solutions_dir: PathBuf,
+    /// Record name (`<results-dir>/<record>.{json,md}` and PNG plots beside it; `compare` defaults to
+    /// `grid-compare-<model>`, the other commands write no record without it).
+    #[arg(long)]
+    pub record: Option<String>,
+    /// Folder of measurement records and plots.
+    #[arg(long, default_value = "bench/results")]
+    pub results_dir: PathBuf,
+}
 
 /// The grid and solver options of a solve.
 #[derive(clap::Args, Clone, Debug)]

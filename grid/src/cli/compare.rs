@@ -1,6 +1,6 @@
 //! `compare`: a model bundle against grid solutions, per `beta`, with PNG slices and a record.
 
-use super::common::{command_line, SolveOptions};
+use super::common::{command_line, SolveOptions, StudyOutputs};
 use super::table::solve_or_load;
 use anyhow::{bail, Context};
 use fastrack_grid::compare::{compare, learned_on_grid, slices};
@@ -22,21 +22,14 @@ pub struct Args {
     /// Planner speed bounds to compare at (grid solutions are loaded from --solutions-dir or solved).
     #[arg(long, value_delimiter = ',', default_value = "0.5,0.875,1.25")]
     betas: Vec<f64>,
-    /// Folder of solution files (reused when their settings match, see `table`).
-    #[arg(long, default_value = "target/grid-solutions")]
-    solutions_dir: PathBuf,
+    #[command(flatten)]
+    outputs: StudyOutputs,
     /// Errors of V are taken over `{V_grid <= factor * V_min_grid}`.
     #[arg(long, default_value_t = 1.5)]
     sublevel_factor: f64,
     /// ONNX Runtime library (default: FASTRACK_ORT_LIB, then .cache/onnxruntime).
     #[arg(long)]
     ort_lib: Option<PathBuf>,
-    /// Record name (default `grid-compare-<model>`).
-    #[arg(long)]
-    record: Option<String>,
-    /// Folder of measurement records and plots.
-    #[arg(long, default_value = "bench/results")]
-    results_dir: PathBuf,
 }
 
 /// Runs `compare`.
@@ -51,8 +44,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let dims =
         GraphDims { n_state: manifest.n_state(), n_params: manifest.n_params(), n_control: manifest.n_control() };
     let evaluator = Evaluator::new(runtime(args.ort_lib.as_deref())?, &bundle.onnx, dims, 1)?;
-    let name = args.record.clone().unwrap_or_else(|| format!("grid-compare-{}", manifest.name));
-    std::fs::create_dir_all(&args.results_dir)?;
+    let name = args.outputs.record.clone().unwrap_or_else(|| format!("grid-compare-{}", manifest.name));
+    std::fs::create_dir_all(&args.outputs.results_dir)?;
     let mut table = Table::new(&[
         "beta",
         "grid V_min",
@@ -66,11 +59,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     ]);
     let mut rows = Vec::new();
     for &beta in &args.betas {
-        let solution = solve_or_load(&system, &solve, beta, &args.solutions_dir)?;
+        let solution = solve_or_load(&system, &solve, beta, &args.outputs.solutions_dir)?;
         let learned = learned_on_grid(&evaluator, &solution)?;
         let c = compare(&solution, &learned, args.sublevel_factor);
         let s = slices(&solution, &learned);
-        let png = args.results_dir.join(format!("{name}-beta{beta}.png"));
+        let png = args.outputs.results_dir.join(format!("{name}-beta{beta}.png"));
         let axes = solution.grid.axes();
         let title = format!(
             "{} beta {beta}: V in ({}, {}) at {:?}; white: V = {:.3}",
@@ -107,7 +100,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let config = json!({ "bundle": args.bundle, "model": manifest.name, "version": manifest.version,
         "untrained": manifest.untrained, "betas": args.betas, "sublevel_factor": args.sublevel_factor, "solver": solve.config() });
     let path = write_record(
-        &args.results_dir,
+        &args.outputs.results_dir,
         &name,
         &command_line(),
         config,

@@ -2,14 +2,13 @@
 //! the non-periodic edges, the sublevel set near `V_min`), across resolutions and `beta`; the horizon at which
 //! the sublevel-set rate first falls below a tolerance; plots and a measurement record.
 
-use super::common::{command_line, SolveOptions};
+use super::common::{command_line, SolveOptions, StudyOutputs};
 use super::table::solve_or_load;
 use fastrack_grid::analysis::{teb, EXTENT_REL_TOL};
 use fastrack_grid::solver::{ConvergenceSet, HistoryPoint, Solution};
 use fastrack_valuefn::plot::{line_chart, Chart, Series};
 use fastrack_valuefn::record::{write_record, Table};
 use serde_json::json;
-use std::path::PathBuf;
 
 /// Arguments of `horizon`.
 #[derive(clap::Args)]
@@ -36,15 +35,8 @@ pub struct Args {
     /// over the preceding window of this length (s).
     #[arg(long, default_value_t = 5.0)]
     vmin_window: f64,
-    /// Folder of solution files (reused when the settings match, as in `table`).
-    #[arg(long, default_value = "target/grid-solutions")]
-    solutions_dir: PathBuf,
-    /// Record name (`bench/results/<record>.{json,md}` and PNG plots beside it).
-    #[arg(long)]
-    record: Option<String>,
-    /// Folder of measurement records.
-    #[arg(long, default_value = "bench/results")]
-    results_dir: PathBuf,
+    #[command(flatten)]
+    outputs: StudyOutputs,
 }
 
 /// One solve and what its history says.
@@ -108,7 +100,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for resolution in &resolutions {
         for &beta in &args.betas {
             let options = SolveOptions { resolution: resolution.clone(), ..args.solve.clone() };
-            let solution = solve_or_load(&system, &options, beta, &args.solutions_dir)?;
+            let solution = solve_or_load(&system, &options, beta, &args.outputs.solutions_dir)?;
             let label = solution.grid.axes().iter().map(|a| a.n.to_string()).collect::<Vec<_>>().join("x");
             let settled = settled(&solution.info.history, args.report_tolerance, args.report_settle_time);
             let vmin_settled = vmin_settled(&solution.info.history, args.report_tolerance, args.vmin_window);
@@ -125,7 +117,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             studies.push(Study { beta, label, solution, settled, vmin_settled });
         }
     }
-    if let Some(name) = &args.record {
+    if let Some(name) = &args.outputs.record {
         write_outputs(&args, set, &studies, name)?;
     }
     Ok(())
@@ -192,7 +184,7 @@ fn write_outputs(args: &Args, set: ConvergenceSet, studies: &[Study], name: &str
             format!("{:?}", teb.extent.iter().map(|x| (x * 1000.0).round() / 1000.0).collect::<Vec<_>>()),
         ]);
     }
-    let dir = &args.results_dir;
+    let dir = &args.outputs.results_dir;
     std::fs::create_dir_all(dir)?;
     let series = |f: &dyn Fn(&HistoryPoint) -> Option<f64>, suffix: &str| -> Vec<Series> {
         studies

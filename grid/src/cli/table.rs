@@ -1,7 +1,7 @@
 //! `table`: TEB over `beta` (the classic FaSTrack bound at `beta_l`/`beta_u` and the Meta-FaSTrack levels),
 //! across resolutions and accuracies, with convergence plots and a measurement record.
 
-use super::common::{command_line, params_for, SolveOptions};
+use super::common::{command_line, params_for, SolveOptions, StudyOutputs};
 use anyhow::Context;
 use fastrack_grid::analysis::{teb, Teb, EXTENT_REL_TOL};
 use fastrack_grid::format::{load, save};
@@ -27,15 +27,8 @@ pub struct Args {
     /// Accuracies to compare, comma separated (overrides --accuracy).
     #[arg(long, value_delimiter = ',')]
     accuracies: Vec<Accuracy>,
-    /// Folder of solution files: solutions found there with the same settings are reused, new ones saved.
-    #[arg(long, default_value = "target/grid-solutions")]
-    solutions_dir: PathBuf,
-    /// Record name (`bench/results/<record>.{json,md}` and PNG plots beside it).
-    #[arg(long)]
-    record: Option<String>,
-    /// Folder of measurement records.
-    #[arg(long, default_value = "bench/results")]
-    results_dir: PathBuf,
+    #[command(flatten)]
+    outputs: StudyOutputs,
 }
 
 /// One solve of the study.
@@ -116,7 +109,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         for resolution in &resolutions {
             for &beta in &betas {
                 let options = SolveOptions { accuracy, resolution: resolution.clone(), ..args.solve.clone() };
-                let solution = solve_or_load(&system, &options, beta, &args.solutions_dir)?;
+                let solution = solve_or_load(&system, &options, beta, &args.outputs.solutions_dir)?;
                 let teb = teb(&solution, &system, EXTENT_REL_TOL);
                 println!(
                     "{accuracy} n={:?} beta={beta}: V_min {:.4} extent {:?} horizon {:.2} s {} wall {:.1} s",
@@ -131,7 +124,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             }
         }
     }
-    if let Some(name) = &args.record {
+    if let Some(name) = &args.outputs.record {
         write_outputs(&args, &system, &betas, &accuracies, &entries, name)?;
     }
     Ok(())
@@ -208,7 +201,7 @@ fn write_outputs(
             }),
         ]);
     }
-    let dir = &args.results_dir;
+    let dir = &args.outputs.results_dir;
     std::fs::create_dir_all(dir)?;
     // V_min against horizon at the finest grid, one line per beta.
     let horizon_series: Vec<Series> = finest
