@@ -229,8 +229,11 @@ pub async fn run(settings: Settings) -> anyhow::Result<()> {
     }
     let stop = {
         let reporter = reporter.clone();
+        let repository_tasks = repository_tasks.abort_handle();
         async move {
             shutdown_signal().await;
+            // No more polling: it must not turn health back to SERVING while draining.
+            repository_tasks.abort();
             set_health(&reporter, ServingStatus::NotServing).await;
             let _ = drain_tx.send(true);
         }
