@@ -255,7 +255,7 @@ fn check(system: &AffineSystem, params: &[f64], grid: &Grid, config: &SolverConf
 }
 
 /// `l(r)` at every grid point.
-pub fn tracking_error_field(system: &AffineSystem, grid: &Grid) -> Vec<f64> {
+fn tracking_error_field(system: &AffineSystem, grid: &Grid) -> Vec<f64> {
     let n = grid.ndim();
     (0..grid.num_points())
         .into_par_iter()
@@ -270,7 +270,7 @@ pub fn tracking_error_field(system: &AffineSystem, grid: &Grid) -> Vec<f64> {
 }
 
 /// `alpha_i(r) >= |dH/dp_i|` at every grid point, point-major, from [`AffineSystem::dissipation_bounds`].
-pub fn dissipation_field(system: &AffineSystem, params: &[f64], grid: &Grid) -> Vec<f64> {
+fn dissipation_field(system: &AffineSystem, params: &[f64], grid: &Grid) -> Vec<f64> {
     let n = grid.ndim();
     let mut alpha = vec![0.0; grid.num_points() * n];
     alpha.par_chunks_mut(n).enumerate().for_each_init(
@@ -284,7 +284,7 @@ pub fn dissipation_field(system: &AffineSystem, params: &[f64], grid: &Grid) -> 
 }
 
 /// The drift `f(r)` at every grid point, point-major.
-pub fn drift_field(hamiltonian: &Hamiltonian, grid: &Grid) -> Vec<f64> {
+fn drift_field(hamiltonian: &Hamiltonian, grid: &Grid) -> Vec<f64> {
     let n = grid.ndim();
     let mut drift = vec![0.0; grid.num_points() * n];
     drift.par_chunks_mut(n).enumerate().for_each_init(
@@ -295,6 +295,40 @@ pub fn drift_field(hamiltonian: &Hamiltonian, grid: &Grid) -> Vec<f64> {
         },
     );
     drift
+}
+
+/// What a solve precomputes on its grid: the Hamiltonian at the parameters and the fields of `l(r)`, the
+/// dissipation bounds and the drift.
+pub struct SolveFields {
+    /// The Hamiltonian at the solve's parameters.
+    pub hamiltonian: Hamiltonian,
+    /// `l(r)` at every point (the obstacle of the tracking value, and its initial condition).
+    pub l: Vec<f64>,
+    alpha: Vec<f64>,
+    drift: Vec<f64>,
+}
+
+impl SolveFields {
+    /// Computes the fields of `system` at `params` on `grid`.
+    pub fn new(system: &AffineSystem, params: &[f64], grid: &Grid) -> Self {
+        let hamiltonian = Hamiltonian::new(system, params);
+        let l = tracking_error_field(system, grid);
+        let alpha = dissipation_field(system, params, grid);
+        let drift = drift_field(&hamiltonian, grid);
+        Self { hamiltonian, l, alpha, drift }
+    }
+
+    /// The spatial scheme on `grid` (the one the fields were computed on); `tracking` adds the obstacle `l`.
+    pub fn scheme<'a>(&'a self, grid: &'a Grid, accuracy: Accuracy, tracking: bool) -> Scheme<'a> {
+        Scheme {
+            grid,
+            hamiltonian: &self.hamiltonian,
+            alpha: &self.alpha,
+            drift: &self.drift,
+            accuracy,
+            obstacle: tracking.then_some(&self.l[..]),
+        }
+    }
 }
 
 fn progress_bar(show: bool, cap: f64) -> ProgressBar {
@@ -319,18 +353,9 @@ pub fn solve(
 ) -> Result<Solution, SolveError> {
     check(system, params, grid, config)?;
     let start = Instant::now();
-    let hamiltonian = Hamiltonian::new(system, params);
-    let l = tracking_error_field(system, grid);
-    let alpha = dissipation_field(system, params, grid);
-    let drift = drift_field(&hamiltonian, grid);
-    let scheme = Scheme {
-        grid,
-        hamiltonian: &hamiltonian,
-        alpha: &alpha,
-        drift: &drift,
-        accuracy: config.accuracy,
-        obstacle: config.tracking.then_some(&l[..]),
-    };
+    let fields = SolveFields::new(system, params, grid);
+    let l = &fields.l;
+    let scheme = fields.scheme(grid, config.accuracy, config.tracking);
     let dt = scheme.cfl_step(config.cfl);
     let mut values = l.clone();
     let mut work = Workspace::new(grid.num_points());

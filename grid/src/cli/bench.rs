@@ -4,10 +4,8 @@
 use super::common::{command_line, params_for};
 use anyhow::{bail, Context};
 use fastrack_grid::grid::Grid;
-use fastrack_grid::hamiltonian::Hamiltonian;
 use fastrack_grid::integrate::{step, RkOrder, Workspace};
-use fastrack_grid::scheme::Scheme;
-use fastrack_grid::solver::{dissipation_field, drift_field, tracking_error_field};
+use fastrack_grid::solver::SolveFields;
 use fastrack_grid::upwind::Accuracy;
 use fastrack_valuefn::record::{write_record, Table};
 use fastrack_valuefn::system::dubins4d;
@@ -47,20 +45,10 @@ pub struct Args {
 /// Point updates (one full RK3 step of one node) per second of ours.
 fn ours(grid: &Grid, params: &[f64], steps: usize) -> f64 {
     let system = dubins4d::system();
-    let hamiltonian = Hamiltonian::new(&system, params);
-    let l = tracking_error_field(&system, grid);
-    let alpha = dissipation_field(&system, params, grid);
-    let drift = drift_field(&hamiltonian, grid);
-    let scheme = Scheme {
-        grid,
-        hamiltonian: &hamiltonian,
-        alpha: &alpha,
-        drift: &drift,
-        accuracy: Accuracy::Weno5,
-        obstacle: Some(&l),
-    };
+    let fields = SolveFields::new(&system, params, grid);
+    let scheme = fields.scheme(grid, Accuracy::Weno5, true);
     let dt = scheme.cfl_step(0.75);
-    let mut values = l.clone();
+    let mut values = fields.l.clone();
     let mut work = Workspace::new(grid.num_points());
     step(&scheme, RkOrder::Three, dt, &mut values, &mut work);
     let start = Instant::now();
