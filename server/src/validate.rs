@@ -41,13 +41,14 @@ pub fn batch(
 ) -> Result<ValidBatch, Status> {
     let m = &model.manifest;
     let (ns, np) = (m.n_state(), m.n_params());
-    let state_names: Vec<&str> = m.state.iter().map(|d| d.name.as_str()).collect();
-    let param_names: Vec<&str> = m.params.iter().map(|d| d.name.as_str()).collect();
+    // Names are joined only for error messages: this runs on every request and tick.
+    let state_names = || m.state.iter().map(|d| d.name.as_str()).collect::<Vec<_>>().join(", ");
+    let param_names = || m.params.iter().map(|d| d.name.as_str()).collect::<Vec<_>>().join(", ");
     if states.is_empty() || !states.len().is_multiple_of(ns) {
         return Err(Status::invalid_argument(format!(
             "states has {} values; must be a positive multiple of n_state = {ns} ({}), row-major [N x {ns}]",
             states.len(),
-            state_names.join(", ")
+            state_names()
         )));
     }
     let n = states.len() / ns;
@@ -59,11 +60,11 @@ pub fn batch(
             "params has {} values; must be N x n_params = {n} x {np} = {} ({}) for the {n} states given",
             params.len(),
             n * np,
-            param_names.join(", ")
+            param_names()
         )));
     }
     for (k, &x) in states.iter().enumerate() {
-        require_finite("states", k, k / ns, state_names[k % ns], x)?;
+        require_finite("states", k, k / ns, &m.state[k % ns].name, x)?;
     }
     let mut max_beta = Vec::with_capacity(n);
     for (i, item) in params.chunks(np).enumerate() {
