@@ -8,7 +8,7 @@ use fastrack_trainer::objective::Objective;
 use fastrack_trainer::sampler::Sampler;
 use fastrack_trainer::train::initial_network;
 use fastrack_valuefn::network::ValueNetwork;
-use fastrack_valuefn::system::{double_integrator, dubins4d};
+use fastrack_valuefn::system::{double_integrator, dubins4d, AffineSystem};
 use rand::{Rng, SeedableRng};
 
 fn device() -> Device {
@@ -78,22 +78,27 @@ fn exact_boundary_model_satisfies_the_boundary_condition() {
     assert!(gap < 1e-6, "V(r, 0) - l(r) = {gap:e}");
 }
 
+/// `n` random states in the domain, costates in `[-2, 2]` and parameters in their ranges, row-major.
+fn random_arguments(system: &AffineSystem, n: usize, seed: u64) -> (Vec<f64>, Vec<f64>, Vec<f64>) {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
+    let mut draw = |dims: Vec<(f64, f64)>| -> Vec<f64> {
+        (0..n).flat_map(|_| dims.iter().map(|&(lo, hi)| rng.random_range(lo..hi)).collect::<Vec<_>>()).collect()
+    };
+    let r = draw(system.state.iter().map(|d| (d.min, d.max)).collect());
+    let p = draw(vec![(-2.0, 2.0); system.n_state()]);
+    let b = draw(system.params.iter().map(|d| (d.min, d.max)).collect());
+    (r, p, b)
+}
+
 #[test]
 fn tensor_hamiltonian_equals_the_f64_hamiltonian() {
     use fastrack_trainer::dynamics::TensorDynamics;
     let device = Device::flex();
     for system in [dubins4d::system(), dubins4d::system().with_shared_parameter(), double_integrator::system()] {
         let dynamics = TensorDynamics::new(&system, &device);
-        let mut rng = rand::rngs::StdRng::seed_from_u64(21);
         let n = 256;
         let (ns, np) = (system.n_state(), system.n_params());
-        let r: Vec<f64> = (0..n)
-            .flat_map(|_| system.state.iter().map(|d| rng.random_range(d.min..d.max)).collect::<Vec<_>>())
-            .collect();
-        let p: Vec<f64> = (0..n * ns).map(|_| rng.random_range(-2.0..2.0)).collect();
-        let b: Vec<f64> = (0..n)
-            .flat_map(|_| system.params.iter().map(|d| rng.random_range(d.min..d.max)).collect::<Vec<_>>())
-            .collect();
+        let (r, p, b) = random_arguments(&system, n, 21);
         let t = |v: &[f64], cols: usize| {
             Tensor::<2>::from_data(TensorData::new(v.iter().map(|&x| x as f32).collect::<Vec<_>>(), [n, cols]), &device)
         };
@@ -117,18 +122,13 @@ fn vertex_velocities_give_the_hamiltonian() {
     let device = Device::flex();
     for system in [dubins4d::system(), dubins4d::system().with_shared_parameter(), double_integrator::system()] {
         let dynamics = TensorDynamics::new(&system, &device);
-        let mut rng = rand::rngs::StdRng::seed_from_u64(22);
         let n = 128;
         let (ns, np) = (system.n_state(), system.n_params());
-        let r: Vec<f32> = (0..n)
-            .flat_map(|_| system.state.iter().map(|d| rng.random_range(d.min..d.max) as f32).collect::<Vec<_>>())
-            .collect();
-        let p: Vec<f32> = (0..n * ns).map(|_| rng.random_range(-2.0f32..2.0)).collect();
-        let b: Vec<f32> = (0..n)
-            .flat_map(|_| system.params.iter().map(|d| rng.random_range(d.min..d.max) as f32).collect::<Vec<_>>())
-            .collect();
-        let t = |v: Vec<f32>, cols: usize| Tensor::<2>::from_data(TensorData::new(v, [n, cols]), &device);
-        let (r, p, b) = (t(r, ns), t(p, ns), t(b, np));
+        let (r, p, b) = random_arguments(&system, n, 22);
+        let t = |v: &[f64], cols: usize| {
+            Tensor::<2>::from_data(TensorData::new(v.iter().map(|&x| x as f32).collect::<Vec<_>>(), [n, cols]), &device)
+        };
+        let (r, p, b) = (t(&r, ns), t(&p, ns), t(&b, np));
         // min over control vertices of max over opponent vertices of p . r' is H for an affine system.
         let h_vertices = dynamics
             .vertex_velocities(&r, &b)
