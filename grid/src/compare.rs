@@ -47,10 +47,17 @@ pub struct Slices {
 }
 
 /// The learned values at every node of `solution`'s grid.
+/// A diagonal-mode bundle (one shared parameter) gets the solution's first parameter: grid solutions are
+/// solved with every parameter equal to `beta`.
 pub fn learned_on_grid(evaluator: &Evaluator, solution: &Solution) -> Result<Vec<f64>, RuntimeError> {
     let grid = &solution.grid;
     let n = grid.ndim();
-    let params: Vec<f32> = solution.info.params.iter().map(|&p| p as f32).collect();
+    let solved = &solution.info.params;
+    let params: Vec<f32> = if evaluator.dims().n_params == solved.len() {
+        solved.iter().map(|&p| p as f32).collect()
+    } else {
+        vec![solved[0] as f32; evaluator.dims().n_params]
+    };
     let mut values = Vec::with_capacity(grid.num_points());
     let mut r = vec![0.0; n];
     for start in (0..grid.num_points()).step_by(BATCH) {

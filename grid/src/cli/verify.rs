@@ -6,7 +6,7 @@ use fastrack_grid::verify::{required_samples, verify_table, VerifyOptions};
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::record::{write_record, Table};
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
-use fastrack_valuefn::system::by_id;
+use fastrack_valuefn::system::for_bundle;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use std::path::PathBuf;
@@ -67,8 +67,9 @@ pub struct Args {
 pub fn run(args: Args) -> anyhow::Result<()> {
     let bundle = Bundle::load(&args.bundle)?;
     let mut manifest = bundle.manifest.clone();
-    let system = by_id(&manifest.system.id)
-        .with_context(|| format!("the bundle's system `{}` is unknown", manifest.system.id))?;
+    let system = for_bundle(&manifest.system.id, manifest.n_params()).with_context(|| {
+        format!("the bundle's system `{}` with {} parameters is unknown", manifest.system.id, manifest.n_params())
+    })?;
     let dims =
         GraphDims { n_state: manifest.n_state(), n_params: manifest.n_params(), n_control: manifest.n_control() };
     let evaluator = Evaluator::new(runtime(args.ort_lib.as_deref())?, &bundle.onnx, dims, 1)?;

@@ -240,5 +240,19 @@ pub fn by_id(id: &str) -> Option<AffineSystem> {
     }
 }
 
+/// The system of a bundle whose manifest names `id` and `n_params` parameters: the system itself, or its
+/// shared-parameter form ([`AffineSystem::with_shared_parameter`]) for a diagonal-mode bundle with one
+/// parameter. `None` if the id is unknown or the count fits neither.
+pub fn for_bundle(id: &str, n_params: usize) -> Option<AffineSystem> {
+    let system = by_id(id)?;
+    if n_params == system.n_params() {
+        Some(system)
+    } else if n_params == 1 {
+        Some(system.with_shared_parameter())
+    } else {
+        None
+    }
+}
+
 /// Ids accepted by [`by_id`].
 pub const SYSTEM_IDS: &[&str] = &[dubins4d::ID, double_integrator::ID];
