@@ -46,18 +46,12 @@ pub struct Slices {
     pub cut: Vec<f64>,
 }
 
-/// The learned values at every node of `solution`'s grid.
-/// A diagonal-mode bundle (one shared parameter) gets the solution's first parameter: grid solutions are
-/// solved with every parameter equal to `beta`.
-pub fn learned_on_grid(evaluator: &Evaluator, solution: &Solution) -> Result<Vec<f64>, RuntimeError> {
+/// The learned values at every node of `solution`'s grid, the bundle evaluated at `params` (its own
+/// parameters: one shared `beta` for a diagonal-mode bundle, `beta` per planner input otherwise).
+pub fn learned_on_grid(evaluator: &Evaluator, solution: &Solution, params: &[f64]) -> Result<Vec<f64>, RuntimeError> {
     let grid = &solution.grid;
     let n = grid.ndim();
-    let solved = &solution.info.params;
-    let params: Vec<f32> = if evaluator.dims().n_params == solved.len() {
-        solved.iter().map(|&p| p as f32).collect()
-    } else {
-        vec![solved[0] as f32; evaluator.dims().n_params]
-    };
+    let params: Vec<f32> = params.iter().map(|&p| p as f32).collect();
     let mut values = Vec::with_capacity(grid.num_points());
     let mut r = vec![0.0; n];
     for start in (0..grid.num_points()).step_by(BATCH) {

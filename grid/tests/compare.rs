@@ -1,5 +1,6 @@
-//! `compare` reads a diagonal-mode bundle (one shared `beta`) on a grid solved with `beta` for every planner
-//! input: the learned values on the grid equal the network's own f64 evaluation at that `beta`.
+//! `compare` evaluates a diagonal-mode bundle (one shared `beta`) on a grid solved with `beta` for every
+//! planner input: the learned values on the grid equal the network's own f64 evaluation at that `beta`, and
+//! the bundle's system is the shared-parameter form of its id.
 
 use fastrack_grid::compare::learned_on_grid;
 use fastrack_grid::grid::Grid;
@@ -24,7 +25,7 @@ fn a_diagonal_bundle_is_evaluated_at_the_solutions_beta() {
     let dims = GraphDims { n_state: 4, n_params: 1, n_control: 2 };
     let evaluator = Evaluator::new(runtime(None).unwrap(), &onnx, dims, 1).unwrap();
 
-    let learned = learned_on_grid(&evaluator, &solution).unwrap();
+    let learned = learned_on_grid(&evaluator, &solution, &[beta]).unwrap();
     assert_eq!(learned.len(), grid.num_points());
     let mut r = vec![0.0; 4];
     for (flat, value) in learned.iter().enumerate() {

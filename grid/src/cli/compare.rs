@@ -60,7 +60,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut rows = Vec::new();
     for &beta in &args.betas {
         let solution = solve_or_load(&system, &solve, beta, &args.outputs.solutions_dir)?;
-        let learned = learned_on_grid(&evaluator, &solution)?;
+        let learned = learned_on_grid(&evaluator, &solution, &vec![beta; manifest.n_params()])?;
         let c = compare(&solution, &learned, args.sublevel_factor);
         let s = slices(&solution, &learned);
         let png = args.outputs.results_dir.join(format!("{name}-beta{beta}.png"));
