@@ -127,6 +127,53 @@ pub fn binary(name: &str) -> PathBuf {
     binary
 }
 
+/// Runs one of the workspace's binaries to success (its stderr in the panic otherwise); returns its stdout.
+pub fn run_binary(name: &str, args: &[&str]) -> String {
+    let output = Command::new(binary(name)).args(args).output().expect("run the binary");
+    assert!(output.status.success(), "{name} {args:?} failed:\n{}", String::from_utf8_lossy(&output.stderr));
+    String::from_utf8_lossy(&output.stdout).into_owned()
+}
+
+/// A tiny training run (16x16 network, 256 points, 20 iterations: seconds) of `system` in `parameter_mode`,
+/// exported as `name` version 1.
+pub fn tiny_training_config(system: &str, parameter_mode: &str, seed: u64, tau_max: f64, name: &str) -> String {
+    format!(
+        r#"
+system = "{system}"
+parameter_mode = "{parameter_mode}"
+seed = {seed}
+checkpoint_every = 1000
+
+[network]
+hidden = [16, 16]
+omega_0 = 30.0
+output_scale = 1.0
+output_offset = 0.5
+
+[loss]
+form = "exact_boundary"
+lambda = 1.0
+pretrain_iterations = 0
+
+[sampling]
+points = 256
+boundary_share = 0.0
+tau_max = {tau_max:?}
+curriculum_iterations = 10
+
+[optimizer]
+iterations = 20
+learning_rate = 1e-3
+final_learning_rate = 1e-4
+gradient_clip_norm = 10.0
+
+[export]
+name = "{name}"
+version = 1
+"#
+    )
+}
+
 /// A free loopback port (bound and released).
 pub fn free_port() -> u16 {
     std::net::TcpListener::bind("127.0.0.1:0").expect("bind").local_addr().expect("addr").port()

@@ -3,57 +3,20 @@
 //! table and the in-process evaluation of the exported graph.
 
 use fastrack_client::{model_ref, pb};
-use fastrack_e2e::{binary, evaluator_for, TestServer};
-use std::process::Command;
-
-const CONFIG: &str = r#"
-system = "double_integrator"
-parameter_mode = "full"
-seed = 3
-checkpoint_every = 1000
-
-[network]
-hidden = [16, 16]
-omega_0 = 30.0
-output_scale = 1.0
-output_offset = 0.5
-
-[loss]
-form = "exact_boundary"
-lambda = 1.0
-pretrain_iterations = 0
-
-[sampling]
-points = 256
-boundary_share = 0.0
-tau_max = 2.0
-curriculum_iterations = 10
-
-[optimizer]
-iterations = 20
-learning_rate = 1e-3
-final_learning_rate = 1e-4
-gradient_clip_norm = 10.0
-
-[export]
-name = "tiny-di"
-version = 1
-"#;
-
-fn trainer(args: &[&str]) {
-    let output = Command::new(binary("fastrack-trainer")).args(args).output().expect("run fastrack-trainer");
-    assert!(output.status.success(), "fastrack-trainer {args:?} failed:\n{}", String::from_utf8_lossy(&output.stderr));
-}
+use fastrack_e2e::{evaluator_for, run_binary, tiny_training_config, TestServer};
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_exported_bundle_is_served() {
     let work = tempfile::tempdir().unwrap();
     let config = work.path().join("tiny.toml");
-    std::fs::write(&config, CONFIG).unwrap();
+    std::fs::write(&config, tiny_training_config("double_integrator", "full", 3, 2.0, "tiny-di")).unwrap();
     let run = work.path().join("run");
     let repo = work.path().join("repo");
-    trainer(&["train", "--config", config.to_str().unwrap(), "--run-dir", run.to_str().unwrap()]);
-    trainer(&["export", "--run-dir", run.to_str().unwrap(), "--out", repo.to_str().unwrap()]);
+    run_binary(
+        "fastrack-trainer",
+        &["train", "--config", config.to_str().unwrap(), "--run-dir", run.to_str().unwrap()],
+    );
+    run_binary("fastrack-trainer", &["export", "--run-dir", run.to_str().unwrap(), "--out", repo.to_str().unwrap()]);
     let bundle = repo.join("tiny-di").join("1");
     let (evaluator, manifest) = evaluator_for(&bundle);
     assert!(!manifest.untrained, "a trained bundle says so");
