@@ -1,0 +1,55 @@
+//! End-to-end training on the double integrator against its closed-form TEB `V_min(beta) = beta^2 / a`:
+//! the committed config is trained in-process, its TEB table is built the way `export` builds it, and
+//! every row is compared with the closed form. The same run with the Hamiltonian's sign flipped must miss.
+//!
+//! The target is 10%; the committed recipe reaches 25% (README, "Training"), so the test holds the
+//! recipe to [`TOLERANCE`] and fails on any regression past it.
+
+use burn::tensor::Device;
+use fastrack_trainer::config::TrainConfig;
+use fastrack_trainer::train::{train, RunDir, Session};
+use fastrack_valuefn::system::double_integrator::closed_form_teb;
+use fastrack_valuefn::teb::{teb_table, AtHorizon, TebOptions};
+use std::sync::atomic::AtomicBool;
+use std::sync::Arc;
+
+/// Largest relative TEB error over the table accepted from the committed recipe.
+const TOLERANCE: f64 = 0.35;
+
+/// Trains `trainer/configs/double_integrator.toml` with the Hamiltonian multiplied by `sign`; returns the
+/// worst relative error of the TEB table's measured minima against the closed form, or the table's error.
+fn worst_teb_error(sign: f64) -> Result<f64, String> {
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/double_integrator.toml");
+    let config = TrainConfig::load(&path).unwrap();
+    let system = config.system().unwrap();
+    let run = tempfile::tempdir().unwrap();
+    let session = Session {
+        run: &RunDir(run.path().to_path_buf()),
+        resume: false,
+        max_iterations: None,
+        progress: false,
+        stop: Arc::new(AtomicBool::new(false)),
+        hamiltonian_sign: sign,
+    };
+    let (network, _) = train(&config, &Device::flex().autodiff(), session).map_err(|e| e.to_string())?;
+    let oracle = AtHorizon { network: &network, tau: config.sampling.tau_max };
+    let report = teb_table(&oracle, &system, &TebOptions::default())?;
+    let errors: Vec<f64> =
+        report.rows.iter().map(|row| (row.measured_min / closed_form_teb(row.beta) - 1.0).abs()).collect();
+    eprintln!("sign {sign}: relative TEB errors {errors:.3?}");
+    Ok(errors.into_iter().fold(0.0, f64::max))
+}
+
+#[test]
+fn trained_double_integrator_teb_is_near_the_closed_form() {
+    let worst = worst_teb_error(1.0).expect("the committed recipe trains and yields a table");
+    assert!(worst < TOLERANCE, "worst TEB error {:.1}% (allowed {:.0}%)", 100.0 * worst, 100.0 * TOLERANCE);
+}
+
+#[test]
+fn a_wrong_hamiltonian_sign_misses_the_closed_form() {
+    match worst_teb_error(-1.0) {
+        Ok(worst) => assert!(worst > 2.0 * TOLERANCE, "a wrong sign still gave a worst TEB error of {worst:.3}"),
+        Err(reason) => eprintln!("the wrong sign yields no table: {reason}"),
+    }
+}
