@@ -24,6 +24,16 @@ fn tensor2(values: Vec<f32>, shape: [usize; 2], device: &Device) -> Tensor<2> {
     Tensor::from_data(TensorData::new(values, shape), device)
 }
 
+/// `(sin z, cos z)` with each transcendental evaluated once: the values are computed on a detached copy and
+/// the first-order derivatives attached as `f(z0) + (z - z0) f'(z0)`, exact at `z = z0`, so the backward
+/// pass multiplies by stored tensors instead of evaluating `cos` and `sin` again.
+fn sin_cos_once(z: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
+    let z0 = z.clone().detach();
+    let (sin0, cos0) = (z0.clone().sin(), z0.clone().cos());
+    let dz = z - z0;
+    (sin0.clone() + dz.clone().mul(cos0.clone()), cos0 - dz.mul(sin0))
+}
+
 impl Siren {
     /// The burn copy of a reference network's weights (transposed to `[n_in, n_out]`).
     pub fn from_network(network: &ValueNetwork, device: &Device) -> Self {
@@ -82,8 +92,9 @@ impl Siren {
         let mut scaled_cos = Vec::with_capacity(n_layers - 1);
         for k in 0..n_layers - 1 {
             let z = (h.matmul(self.weights[k].val()) + self.biases[k].val().unsqueeze::<2>()).mul_scalar(omega_0);
-            scaled_cos.push(z.clone().cos().mul_scalar(omega_0));
-            h = z.sin();
+            let (sin, cos) = sin_cos_once(z);
+            scaled_cos.push(cos.mul_scalar(omega_0));
+            h = sin;
         }
         let last = n_layers - 1;
         let output = h.matmul(self.weights[last].val()) + self.biases[last].val().unsqueeze::<2>();
@@ -96,5 +107,34 @@ impl Siren {
             }
         }
         Forward { output, input_grad: g }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::sin_cos_once;
+    use burn::tensor::{Device, Tensor, TensorData};
+
+    #[test]
+    fn sin_cos_once_has_the_values_and_derivatives_of_sin_and_cos() {
+        let device = Device::flex().autodiff();
+        let z: Vec<f32> = (0..64).map(|i| -40.0 + 1.27 * i as f32).collect();
+        let (a, b): (Vec<f32>, Vec<f32>) = (0..64).map(|i| (0.3 + 0.01 * i as f32, 1.0 - 0.02 * i as f32)).unzip();
+        let tensor = |v: &[f32]| Tensor::<2>::from_data(TensorData::new(v.to_vec(), [8, 8]), &device);
+        let input = tensor(&z).require_grad();
+        let (sin, cos) = sin_cos_once(input.clone());
+        let values = |t: Tensor<2>| t.into_data().try_to_vec::<f32>().unwrap();
+        let (sin_values, cos_values) = (values(sin.clone()), values(cos.clone()));
+        let grads = (sin.mul(tensor(&a)) + cos.mul(tensor(&b))).sum().backward();
+        let gradient = values(input.grad(&grads).unwrap());
+        for i in 0..z.len() {
+            let x = f64::from(z[i]);
+            assert!(
+                (f64::from(sin_values[i]) - x.sin()).abs() < 1e-6 && (f64::from(cos_values[i]) - x.cos()).abs() < 1e-6
+            );
+            // d/dz (a sin z + b cos z) = a cos z - b sin z.
+            let expected = f64::from(a[i]) * x.cos() - f64::from(b[i]) * x.sin();
+            assert!((f64::from(gradient[i]) - expected).abs() < 1e-5, "z = {x}: {} vs {expected}", gradient[i]);
+        }
     }
 }
