@@ -9,7 +9,7 @@
 use crate::grid::Grid;
 use crate::hamiltonian::Hamiltonian;
 use crate::integrate::{step, RkOrder, Workspace};
-use crate::scheme::Scheme;
+use crate::scheme::{Flux, Scheme};
 use crate::upwind::Accuracy;
 use fastrack_valuefn::system::AffineSystem;
 use indicatif::{ProgressBar, ProgressStyle};
@@ -22,6 +22,9 @@ use std::time::Instant;
 pub struct SolverConfig {
     /// Derivative approximation.
     pub accuracy: Accuracy,
+    /// Numerical Hamiltonian (files written before it was recorded used Lax-Friedrichs).
+    #[serde(default)]
+    pub flux: Flux,
     /// TVD Runge-Kutta order.
     pub rk: RkOrder,
     /// CFL number (`dt = cfl / max sum_i alpha_i / h_i`).
@@ -67,6 +70,7 @@ impl Default for SolverConfig {
     fn default() -> Self {
         Self {
             accuracy: Accuracy::Weno5,
+            flux: Flux::LaxFriedrichs,
             rk: RkOrder::Three,
             cfl: 0.75,
             horizon_cap: 30.0,
@@ -237,6 +241,12 @@ fn check(system: &AffineSystem, params: &[f64], grid: &Grid, config: &SolverConf
             Err(SolveError::Setting(format!("{name} must be a positive number, got {x}")))
         }
     };
+    if config.flux == Flux::Godunov && !Hamiltonian::new(system, params).is_separable() {
+        return Err(SolveError::Setting(format!(
+            "the godunov flux needs every input of `{}` to act on one state coordinate; use lax_friedrichs",
+            system.id
+        )));
+    }
     positive("cfl", config.cfl)?;
     positive("horizon cap", config.horizon_cap)?;
     positive("tolerance", config.tolerance)?;
@@ -319,8 +329,9 @@ impl SolveFields {
     }
 
     /// The spatial scheme on `grid` (the one the fields were computed on); `tracking` adds the obstacle `l`.
-    pub fn scheme<'a>(&'a self, grid: &'a Grid, accuracy: Accuracy, tracking: bool) -> Scheme<'a> {
+    pub fn scheme<'a>(&'a self, grid: &'a Grid, accuracy: Accuracy, flux: Flux, tracking: bool) -> Scheme<'a> {
         Scheme {
+            flux,
             grid,
             hamiltonian: &self.hamiltonian,
             alpha: &self.alpha,
@@ -355,7 +366,7 @@ pub fn solve(
     let start = Instant::now();
     let fields = SolveFields::new(system, params, grid);
     let l = &fields.l;
-    let scheme = fields.scheme(grid, config.accuracy, config.tracking);
+    let scheme = fields.scheme(grid, config.accuracy, config.flux, config.tracking);
     let dt = scheme.cfl_step(config.cfl);
     let mut values = l.clone();
     let mut work = Workspace::new(grid.num_points());

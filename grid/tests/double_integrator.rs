@@ -6,6 +6,7 @@
 //! resolution of the error set, and (as the test checks) the same relative error.
 
 use fastrack_grid::grid::{Axis, Grid};
+use fastrack_grid::scheme::Flux;
 use fastrack_grid::solver::{solve, SolverConfig};
 use fastrack_valuefn::system::double_integrator::{closed_form_teb, system};
 
@@ -55,6 +56,31 @@ fn v_min_within_3_percent_of_closed_form_and_error_shrinks_under_refinement() {
             errors.push(error);
         }
         assert!(errors[1] < errors[0], "beta {beta}: the error did not shrink under refinement: {errors:?}");
+    }
+}
+
+#[test]
+fn godunov_flux_is_closer_to_the_closed_form_than_lax_friedrichs_at_a_tighter_tolerance() {
+    // Half the tolerance above runs the solve further into the horizon, where Lax-Friedrichs' dissipation on
+    // the kinked valley of `V` has pushed `V_min` above the closed form; Godunov's flux adds less of it.
+    for (beta, half_x, half_v, tolerance) in cases() {
+        let config = |flux| SolverConfig { tolerance: tolerance / 2.0, flux, ..SolverConfig::default() };
+        let mut errors = Vec::new();
+        for (n_x, n_v) in [(201, 101), (241, 121)] {
+            let grid = grid(half_x, half_v, n_x, n_v);
+            let (godunov, converged) = ratio(beta, &grid, &config(Flux::Godunov));
+            let (lax_friedrichs, _) = ratio(beta, &grid, &config(Flux::LaxFriedrichs));
+            eprintln!("beta {beta}, {n_x}x{n_v}: V_min / closed form: godunov {godunov:.4}, lax-friedrichs {lax_friedrichs:.4}");
+            assert!(converged, "beta {beta}, {n_x}x{n_v}: godunov not converged by the horizon cap");
+            let error = (godunov - 1.0).abs();
+            assert!(error < 0.03, "beta {beta}, {n_x}x{n_v}: godunov V_min is {:.2}% off", 100.0 * error);
+            assert!(
+                error < (lax_friedrichs - 1.0).abs(),
+                "beta {beta}, {n_x}x{n_v}: godunov {godunov:.4} no closer than lax-friedrichs {lax_friedrichs:.4}"
+            );
+            errors.push(error);
+        }
+        assert!(errors[1] < errors[0], "beta {beta}: the godunov error did not shrink under refinement: {errors:?}");
     }
 }
 

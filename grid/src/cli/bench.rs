@@ -5,6 +5,7 @@ use super::common::{command_line, params_for};
 use anyhow::{bail, Context};
 use fastrack_grid::grid::Grid;
 use fastrack_grid::integrate::{step, RkOrder, Workspace};
+use fastrack_grid::scheme::Flux;
 use fastrack_grid::solver::SolveFields;
 use fastrack_grid::upwind::Accuracy;
 use fastrack_valuefn::record::{write_record, Table};
@@ -46,7 +47,7 @@ pub struct Args {
 fn ours(grid: &Grid, params: &[f64], steps: usize) -> f64 {
     let system = dubins4d::system();
     let fields = SolveFields::new(&system, params, grid);
-    let scheme = fields.scheme(grid, Accuracy::Weno5, true);
+    let scheme = fields.scheme(grid, Accuracy::Weno5, Flux::LaxFriedrichs, true);
     let dt = scheme.cfl_step(0.75);
     let mut values = fields.l.clone();
     let mut work = Workspace::new(grid.num_points());

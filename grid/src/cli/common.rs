@@ -3,6 +3,7 @@
 use anyhow::{bail, Context};
 use fastrack_grid::grid::{Axis, Grid};
 use fastrack_grid::integrate::RkOrder;
+use fastrack_grid::scheme::Flux;
 use fastrack_grid::solver::{ConvergenceSet, SolverConfig};
 use fastrack_grid::upwind::Accuracy;
 use fastrack_valuefn::system::{by_id, AffineSystem, SYSTEM_IDS};
@@ -38,6 +39,10 @@ pub struct SolveOptions {
     /// Derivative approximation: first, eno2, weno5.
     #[arg(long, default_value = "weno5")]
     pub accuracy: Accuracy,
+    /// Numerical Hamiltonian: lax_friedrichs (any system) or godunov (every input acting on one state
+    /// coordinate, as in dubins4d and the double integrator).
+    #[arg(long, default_value = "lax_friedrichs")]
+    pub flux: Flux,
     /// TVD Runge-Kutta order: 1, 2, 3.
     #[arg(long, default_value = "3")]
     pub rk: RkOrder,
@@ -76,6 +81,7 @@ impl SolveOptions {
     pub fn config(&self) -> SolverConfig {
         SolverConfig {
             accuracy: self.accuracy,
+            flux: self.flux,
             rk: self.rk,
             cfl: self.cfl,
             horizon_cap: self.horizon_cap,
