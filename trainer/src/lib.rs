@@ -10,4 +10,5 @@ pub mod model;
 pub mod objective;
 pub mod report;
 pub mod sampler;
+pub mod sincos;
 pub mod train;

@@ -26,10 +26,19 @@ fn tensor2(values: Vec<f32>, shape: [usize; 2], device: &Device) -> Tensor<2> {
 
 /// `(sin z, cos z)` with each transcendental evaluated once: the values are computed on a detached copy and
 /// the first-order derivatives attached as `f(z0) + (z - z0) f'(z0)`, exact at `z = z0`, so the backward
-/// pass multiplies by stored tensors instead of evaluating `cos` and `sin` again.
+/// pass multiplies by stored tensors instead of evaluating `cos` and `sin` again. On the CPU backend both
+/// come from one vectorised pass ([`crate::sincos`]); GPU backends use their own kernels.
 fn sin_cos_once(z: Tensor<2>) -> (Tensor<2>, Tensor<2>) {
     let z0 = z.clone().detach();
-    let (sin0, cos0) = (z0.clone().sin(), z0.clone().cos());
+    let device = z0.device();
+    let (sin0, cos0) = if device == Device::flex() {
+        let shape = z0.dims();
+        let values: Vec<f32> = z0.clone().into_data().try_into_vec().expect("f32 pre-activations");
+        let (sin, cos) = crate::sincos::sin_cos(&values);
+        (tensor2(sin, shape, &device), tensor2(cos, shape, &device))
+    } else {
+        (z0.clone().sin(), z0.clone().cos())
+    };
     let dz = z - z0;
     (sin0.clone() + dz.clone().mul(cos0.clone()), cos0 - dz.mul(sin0))
 }
