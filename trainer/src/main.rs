@@ -222,7 +222,7 @@ fn run_bench(config: &TrainConfig, out: &std::path::Path) -> anyhow::Result<()> 
         width: config.network.hidden[0],
         depth: config.network.hidden.len(),
         points: config.sampling.points,
-        iterations: 10,
+        iterations: 100,
     };
     let paper = Case { width: 512, depth: 3, points: 65_536, iterations: 3 };
     let mut table = Table::new(&[
