@@ -222,7 +222,7 @@ mod tests {
                 assert!((got - want).abs() < 1e-3, "{id}: {got} vs sampled {want}");
                 let same = h.godunov(&f, &left, &left).unwrap();
                 assert!((same - h.eval(&r, &left)).abs() < 1e-12, "{id}: not consistent");
-                // Godunov never dissipates more than Lax-Friedrichs with valid bounds.
+                // Godunov stays within Lax-Friedrichs' dissipation of the Lax-Friedrichs flux.
                 let mut alpha = vec![0.0; n];
                 system.dissipation_bounds(&r, &params, &mut alpha);
                 let lf = h.lax_friedrichs(&f, &left, &right, &alpha);

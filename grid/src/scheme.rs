@@ -17,8 +17,8 @@ pub enum Flux {
     #[default]
     LaxFriedrichs,
     /// Godunov's: systems whose every input acts on one state coordinate. The least dissipative monotone
-    /// flux; Lax-Friedrichs' dissipation on the kinked valley of the tracking value makes `V_min` creep up
-    /// with the horizon.
+    /// flux: closer to the double integrator's closed form than Lax-Friedrichs, but lower (the unsafe side)
+    /// where a valley of `V` is only a few cells wide (grid README).
     Godunov,
 }
 
@@ -66,8 +66,8 @@ pub struct Scheme<'a> {
     pub drift: &'a [f64],
     /// Derivative approximation.
     pub accuracy: Accuracy,
-    /// Numerical Hamiltonian; [`Flux::Godunov`] needs a separable Hamiltonian
-    /// ([`Hamiltonian::is_separable`]), which the solver checks before it builds a scheme.
+    /// Numerical Hamiltonian. [`Flux::Godunov`] needs a separable Hamiltonian ([`Hamiltonian::is_separable`]);
+    /// on any other it falls back to Lax-Friedrichs, and [`crate::solver::solve`] refuses that combination.
     pub flux: Flux,
     /// `l(r)` at every point, or `None` to skip the obstacle (the plain terminal-cost value).
     pub obstacle: Option<&'a [f64]>,

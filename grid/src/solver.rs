@@ -434,6 +434,25 @@ mod tests {
     use crate::grid::Axis;
 
     #[test]
+    fn the_godunov_flux_is_refused_for_a_system_with_an_input_on_two_coordinates() {
+        let mut system = fastrack_valuefn::system::by_id("dubins4d").unwrap();
+        system.g_control[(0, 0)] = 0.5;
+        let axes = system
+            .state
+            .iter()
+            .map(|d| Axis { name: d.name.into(), min: d.min, max: d.max, n: 5, periodic: d.periodic })
+            .collect();
+        let grid = Grid::new(axes).unwrap();
+        let config = SolverConfig { flux: Flux::Godunov, horizon_cap: 0.01, ..SolverConfig::default() };
+        match solve(&system, &[1.0, 1.0], &grid, &config, false) {
+            Err(SolveError::Setting(message)) => assert!(message.contains("lax_friedrichs"), "{message}"),
+            other => panic!("expected a settings error, got {:?}", other.map(|s| s.info.horizon)),
+        }
+        let config = SolverConfig { flux: Flux::LaxFriedrichs, ..config };
+        assert!(solve(&system, &[1.0, 1.0], &grid, &config, false).is_ok());
+    }
+
+    #[test]
     fn region_rates_split_the_change_by_edge_distance_and_sublevel_set() {
         let axis = |periodic| Axis { name: "x".into(), min: 0.0, max: 1.0, n: 8, periodic };
         let grid = Grid::new(vec![axis(false), axis(true)]).unwrap();

@@ -5,6 +5,7 @@ use super::common::{command_line, params_for, SolveOptions, StudyOutputs};
 use anyhow::Context;
 use fastrack_grid::analysis::{teb, Teb, EXTENT_REL_TOL};
 use fastrack_grid::format::{load, save};
+use fastrack_grid::scheme::Flux;
 use fastrack_grid::solver::{solve, Solution};
 use fastrack_grid::upwind::Accuracy;
 use fastrack_valuefn::plot::{line_chart, Chart, Series};
@@ -50,6 +51,9 @@ pub fn solution_path(dir: &Path, system: &str, beta: f64, resolution: &[usize], 
     };
     if config.settle_time > 0.0 {
         set += &format!("-settle{}", config.settle_time);
+    }
+    if config.flux != Flux::LaxFriedrichs {
+        set += &format!("-{}", config.flux);
     }
     dir.join(format!(
         "{system}-beta{beta}-n{res}-{}-rk{}-tol{}-cap{}{set}{}.ftgrid",
