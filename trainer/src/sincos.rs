@@ -3,13 +3,15 @@
 //! through libm, which profiled at a third of a SIREN training iteration.
 //!
 //! Method (Cephes `sinf` / `cosf`): `k = round(x 2/pi)`, `r = x - k pi/2` with `pi/2` split in three parts
-//! (Cody-Waite, exact products for `|k| < 2^15`), minimax polynomials for `sin r` and `cos r` on
-//! `[-pi/4, pi/4]`, and the quadrant `k mod 4` choosing and signing them. Absolute error below `1e-6` for
-//! `|x| < 2 * 10^4`, which covers SIREN pre-activations (`omega_0 (x W + b)`) by orders of magnitude.
+//! (Cody-Waite; the first two products are exact for `|x|` below about 13,000), minimax polynomials for
+//! `sin r` and `cos r` on `[-pi/4, pi/4]`, and the quadrant `k mod 4` choosing and signing them. Absolute
+//! error below `1e-6` for `|x| < 2 * 10^4` (tested), which covers SIREN pre-activations
+//! (`omega_0 (x W + b)`) by orders of magnitude.
 
 use rayon::prelude::*;
 
-/// `pi / 2 = PIO2_1 + PIO2_2 + PIO2_3`, the first two with few significant bits so `k * PIO2_x` is exact.
+/// `pi / 2 = PIO2_1 + PIO2_2 + PIO2_3`, the first two with few significant bits (8 and 11) so that
+/// `k * PIO2_1` and `k * PIO2_2` are exact for moderate `k`.
 const PIO2_1: f32 = 1.570_312_5;
 const PIO2_2: f32 = 4.837_513e-4;
 const PIO2_3: f32 = 7.549_79e-8;
