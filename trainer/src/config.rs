@@ -3,7 +3,7 @@
 use anyhow::{bail, ensure, Context};
 use fastrack_valuefn::system::{by_id, AffineSystem, SYSTEM_IDS};
 use serde::{Deserialize, Serialize};
-use std::path::Path;
+use std::path::{Path, PathBuf};
 
 /// How the value is built from the network output `y`.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -84,6 +84,9 @@ pub struct TrainConfig {
     pub checkpoint_every: u64,
     /// Bundle written by `export`.
     pub export: ExportConfig,
+    /// Supervision by grid solutions beside the residual (absent: the residual alone, pure DeepReach).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub supervision: Option<SupervisionConfig>,
 }
 
 /// Network shape.
@@ -188,6 +191,29 @@ pub struct OptimizerConfig {
     pub gradient_clip_norm: Option<f64>,
 }
 
+/// Grid solutions (`.ftgrid`, written by `fastrack-grid`) whose values supervise the network at their
+/// horizon; see `crate::supervision`.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct SupervisionConfig {
+    /// Solution files, relative to the working directory.
+    pub solutions: Vec<PathBuf>,
+    /// Weight of the mean squared error to the grid values, added to the residual loss.
+    pub weight: f64,
+    /// Grid nodes drawn per iteration.
+    pub points: usize,
+    /// Share of the nodes drawn from `{V <= focus_factor * V_min}` of their solution (default 0).
+    #[serde(default)]
+    pub focus_share: f64,
+    /// Level factor of that set (default 2).
+    #[serde(default = "default_focus_factor")]
+    pub focus_factor: f64,
+}
+
+fn default_focus_factor() -> f64 {
+    2.0
+}
+
 /// Where the trained model goes.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
@@ -250,6 +276,13 @@ impl TrainConfig {
         ensure!(o.learning_rate > 0.0 && o.final_learning_rate > 0.0, "learning rates must be > 0");
         ensure!(o.gradient_clip_norm.is_none_or(|c| c > 0.0), "optimizer.gradient_clip_norm must be > 0 when set");
         ensure!(self.checkpoint_every > 0, "checkpoint_every must be > 0");
+        if let Some(sup) = &self.supervision {
+            ensure!(!sup.solutions.is_empty(), "supervision.solutions must list at least one grid solution file");
+            ensure!(sup.weight.is_finite() && sup.weight > 0.0, "supervision.weight must be > 0");
+            ensure!(sup.points > 0, "supervision.points must be > 0");
+            ensure!((0.0..=1.0).contains(&sup.focus_share), "supervision.focus_share must be in [0, 1]");
+            ensure!(sup.focus_factor.is_finite() && sup.focus_factor >= 1.0, "supervision.focus_factor must be >= 1");
+        }
         ensure!(!self.export.name.is_empty() && self.export.version > 0, "export needs a name and a positive version");
         Ok(())
     }

@@ -11,4 +11,5 @@ pub mod objective;
 pub mod report;
 pub mod sampler;
 pub mod sincos;
+pub mod supervision;
 pub mod train;

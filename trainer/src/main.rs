@@ -177,8 +177,10 @@ fn main() -> anyhow::Result<()> {
             let losses = state.last_losses.unwrap_or_default();
             let provenance = Provenance::here_and_now(
                 format!(
-                    "DeepReach ({:?} loss, {:?} parameters), burn",
-                    state.config.loss.form, state.config.parameter_mode
+                    "DeepReach ({:?} loss, {:?} parameters{}), burn",
+                    state.config.loss.form,
+                    state.config.parameter_mode,
+                    if state.config.supervision.is_some() { ", supervised by grid solutions" } else { "" }
                 ),
                 serde_json::to_value(&state.config)?,
                 state.iteration,
@@ -186,6 +188,7 @@ fn main() -> anyhow::Result<()> {
                     ("total".into(), losses[0]),
                     ("boundary".into(), losses[1]),
                     ("residual".into(), losses[2]),
+                    ("supervision".into(), losses[3]),
                 ]),
                 state.wall_time_s,
             );

@@ -7,6 +7,7 @@ use crate::config::{LossForm, Residual, ResidualNorm, TrainConfig};
 use crate::dynamics::TensorDynamics;
 use crate::model::Siren;
 use crate::sampler::Batch;
+use crate::supervision::GridSupervision;
 use burn::tensor::{Device, Tensor, TensorData};
 use fastrack_valuefn::network::InputNormalization;
 use fastrack_valuefn::system::AffineSystem;
@@ -21,6 +22,8 @@ pub struct LossTerms {
     /// Mean absolute (or, with the `l2` norm, squared) residual: `min(V - l, dV/dtau - H)` or the
     /// semi-Lagrangian one.
     pub residual: f64,
+    /// Mean squared error to the grid values (0 without supervision).
+    pub supervision: f64,
 }
 
 /// `V`, its derivatives and `l` on a batch.
@@ -58,6 +61,8 @@ pub struct Objective {
     periodic: Vec<(usize, f64, f64)>,
     /// Multiplies the Hamiltonian: 1 always, except in tests showing that a wrong sign fails.
     pub hamiltonian_sign: f64,
+    /// Grid supervision and its weight, if configured.
+    supervision: Option<(GridSupervision, f64)>,
 }
 
 impl Objective {
@@ -100,7 +105,19 @@ impl Objective {
                 .map(|(j, d)| (j, d.min, d.max - d.min))
                 .collect(),
             hamiltonian_sign: 1.0,
+            supervision: None,
         }
+    }
+
+    /// Adds the grid-supervision term, weighted by `weight`.
+    pub fn with_supervision(self, supervision: GridSupervision, weight: f64) -> Self {
+        Self { supervision: Some((supervision, weight)), ..self }
+    }
+
+    /// Mean squared error of `V` to the grid values drawn at `iteration`.
+    fn supervision_error(&self, supervision: &GridSupervision, model: &Siren, iteration: u64, device: &Device) -> Tensor<1> {
+        let batch = supervision.batch(iteration, device);
+        (self.value_at(model, batch.tau, batch.state, batch.params) - batch.target).powi_scalar(2).mean()
     }
 
     /// `V`, `dV/dtau`, `dV/dr` and `l` in physical units.
@@ -246,10 +263,18 @@ impl Objective {
             }
         };
         let scalar = |t: Tensor<1>| f64::from(t.into_scalar::<f32>());
+        let (total, supervision) = match &self.supervision {
+            Some((grid, weight)) => {
+                let error = self.supervision_error(grid, model, iteration, &batch.tau.device());
+                (total + error.clone().mul_scalar(*weight), Some(error))
+            }
+            None => (total, None),
+        };
         let terms = LossTerms {
             total: scalar(total.clone()),
             boundary: boundary.map_or(0.0, scalar),
             residual: scalar(residual),
+            supervision: supervision.map_or(0.0, scalar),
         };
         (total, terms)
     }

@@ -6,6 +6,7 @@ use crate::config::TrainConfig;
 use crate::model::Siren;
 use crate::objective::{LossTerms, Objective};
 use crate::sampler::Sampler;
+use crate::supervision::GridSupervision;
 use anyhow::{ensure, Context};
 use burn::grad_clipping::GradientClippingConfig;
 use burn::module::Module;
@@ -29,8 +30,8 @@ pub struct RunState {
     pub iteration: u64,
     /// Training wall time so far (s), over all sessions.
     pub wall_time_s: f64,
-    /// Loss terms of the last iteration.
-    pub last_losses: Option<[f64; 3]>,
+    /// Loss terms of the last iteration: total, boundary, residual, grid supervision.
+    pub last_losses: Option<[f64; 4]>,
 }
 
 /// Files of a run directory.
@@ -140,7 +141,10 @@ pub fn train(config: &TrainConfig, device: &Device, session: Session<'_>) -> any
     let objective = {
         let mut o = Objective::new(config, &system, &network.input, device);
         o.hamiltonian_sign = session.hamiltonian_sign;
-        o
+        match &config.supervision {
+            Some(s) => o.with_supervision(GridSupervision::load(s, &system, config.sampling.tau_max, config.seed)?, s.weight),
+            None => o,
+        }
     };
     let sampler = Sampler::new(
         &system,
@@ -171,13 +175,13 @@ pub fn train(config: &TrainConfig, device: &Device, session: Session<'_>) -> any
         let grads = GradientsParams::from_grads(loss.backward(), &model);
         model = optimizer.step(config.learning_rate(it), model, grads);
         state.iteration += 1;
-        state.last_losses = Some([terms.total, terms.boundary, terms.residual]);
+        state.last_losses = Some([terms.total, terms.boundary, terms.residual, terms.supervision]);
         state.wall_time_s = wall_before + session_start.elapsed().as_secs_f64();
         if it.is_multiple_of(10) || state.iteration == end {
             write_log_line(&mut log, it, &terms, config.tau_limit(it), config.learning_rate(it), state.wall_time_s)?;
             bar.set_message(format!(
-                "loss {:.3e} (bc {:.2e}, hji {:.2e})",
-                terms.total, terms.boundary, terms.residual
+                "loss {:.3e} (bc {:.2e}, hji {:.2e}, grid {:.2e})",
+                terms.total, terms.boundary, terms.residual, terms.supervision
             ));
         }
         bar.set_position(state.iteration);
@@ -201,6 +205,7 @@ fn write_log_line(
 ) -> anyhow::Result<()> {
     let line = serde_json::json!({
         "iteration": it, "loss": terms.total, "boundary": terms.boundary, "residual": terms.residual,
+        "supervision": terms.supervision,
         "tau_limit": tau, "learning_rate": lr, "wall_time_s": wall,
     });
     writeln!(log, "{line}")?;

@@ -1,0 +1,232 @@
+//! Supervision by grid solutions (optional): beside the HJI residual, the network's value at each
+//! solution's horizon is pulled towards the grid solver's values at that solution's nodes.
+//!
+//! The residual alone does not hold the kink at the value's minimum (README, "Where training stands"), so
+//! the learned bound drifts; ground-truth values where a grid solver can compute them (dubins4d whole, the
+//! 13-D quadcopter through its exact 4-D/4-D/2-D split) anchor it, and the residual shapes the network
+//! between the supervised `beta` and horizons.
+
+use crate::config::SupervisionConfig;
+use burn::tensor::{Device, Tensor, TensorData};
+use fastrack_grid::format::{load, FormatError};
+use fastrack_grid::solver::Solution;
+use fastrack_valuefn::system::AffineSystem;
+use rand::{Rng, SeedableRng};
+use std::path::PathBuf;
+
+/// A grid solution that cannot supervise this training run.
+#[derive(Debug, thiserror::Error)]
+pub enum SupervisionError {
+    /// The file cannot be read or is not a solution.
+    #[error(transparent)]
+    Format(#[from] FormatError),
+    /// The solution does not fit the system, its domain, its parameters or the trained horizon.
+    #[error("{path}: {problem}")]
+    Mismatch {
+        /// The solution file.
+        path: PathBuf,
+        /// What does not fit, and what is allowed.
+        problem: String,
+    },
+}
+
+/// One solution and how it enters the network.
+struct Supervised {
+    solution: Solution,
+    /// The network's parameter inputs for it (one shared `beta` in diagonal mode).
+    params: Vec<f32>,
+    /// Nodes of `{V <= focus_factor * V_min}`, where the tracking error bound lies.
+    near_minimum: Vec<usize>,
+}
+
+/// Target values drawn for one iteration.
+pub struct SupervisionBatch {
+    /// Horizon `[M, 1]` (each solution's own).
+    pub tau: Tensor<2>,
+    /// Relative states `[M, n_state]` (grid nodes).
+    pub state: Tensor<2>,
+    /// Parameters `[M, n_params]`.
+    pub params: Tensor<2>,
+    /// Grid values `[M, 1]`.
+    pub target: Tensor<2>,
+}
+
+/// Grid solutions and how many points each iteration draws.
+pub struct GridSupervision {
+    /// Sorted by parameter when `blend_in_beta`.
+    solutions: Vec<Supervised>,
+    /// One network parameter and several solutions: targets at any `beta` between two solutions.
+    blend_in_beta: bool,
+    points: usize,
+    focus_share: f64,
+    seed: u64,
+}
+
+impl GridSupervision {
+    /// Loads and checks the solutions of `config` against the trained `system` (in its parameter mode) and
+    /// the largest trained horizon `tau_max`. With one network parameter and several solutions, they must
+    /// share one grid and horizon and have distinct `beta`.
+    pub fn load(
+        config: &SupervisionConfig,
+        system: &AffineSystem,
+        tau_max: f64,
+        seed: u64,
+    ) -> Result<Self, SupervisionError> {
+        let mut solutions = config
+            .solutions
+            .iter()
+            .map(|path| {
+                let solution = load(path)?;
+                let mismatch = |problem: String| SupervisionError::Mismatch { path: path.clone(), problem };
+                check_fits(&solution, system, tau_max).map_err(mismatch)?;
+                let params = network_params(&solution.info.params, system).map_err(mismatch)?;
+                let v_min = solution.values.iter().copied().fold(f64::INFINITY, f64::min);
+                let near_minimum = (0..solution.values.len())
+                    .filter(|&i| solution.values[i] <= config.focus_factor * v_min)
+                    .collect();
+                Ok((path.clone(), Supervised { solution, params, near_minimum }))
+            })
+            .collect::<Result<Vec<_>, SupervisionError>>()?;
+        let blend_in_beta = system.n_params() == 1 && solutions.len() > 1;
+        if blend_in_beta {
+            solutions.sort_by(|a, b| a.1.params[0].total_cmp(&b.1.params[0]));
+            let (first_path, first) = &solutions[0];
+            for (path, s) in &solutions[1..] {
+                let mismatch = |problem: String| SupervisionError::Mismatch { path: path.clone(), problem };
+                if s.solution.grid.axes() != first.solution.grid.axes() || s.solution.info.horizon != first.solution.info.horizon {
+                    return Err(mismatch(format!(
+                        "blending in beta needs one grid and horizon for every solution; {} differs",
+                        first_path.display()
+                    )));
+                }
+            }
+            if let Some(w) = solutions.windows(2).find(|w| w[0].1.params == w[1].1.params) {
+                return Err(SupervisionError::Mismatch {
+                    path: w[1].0.clone(),
+                    problem: format!("a second solution at beta = {}", w[1].1.params[0]),
+                });
+            }
+        }
+        for (path, s) in &solutions {
+            tracing::info!(
+                file = %path.display(),
+                params = ?s.params,
+                horizon = s.solution.info.horizon,
+                nodes = s.solution.values.len(),
+                near_minimum = s.near_minimum.len(),
+                "grid supervision"
+            );
+        }
+        let solutions = solutions.into_iter().map(|(_, s)| s).collect();
+        Ok(Self { solutions, blend_in_beta, points: config.points, focus_share: config.focus_share, seed })
+    }
+
+    /// The targets drawn at `iteration` (reproducible from the seed).
+    ///
+    /// Each row takes a pair of solutions `(a, b)` and a blend weight `w`: with `blend_in_beta`, `beta` is
+    /// drawn uniformly between the first and last solution's, `a` and `b` are the solutions on either side and
+    /// the target is `(1 - w) V_a + w V_b` (`V` is nondecreasing in `beta`, since a faster planner only helps
+    /// the adversary, so the blend lies between the two); otherwise the solutions are taken in turn with
+    /// `w = 0`. The point is a node of the nearer solution (a `focus_share` of them from near its minimum),
+    /// moved uniformly within its cell, and the values there are the grid's multilinear interpolation: points
+    /// between the nodes keep the sine network from fitting the nodes while it oscillates between them.
+    pub fn batch(&self, iteration: u64, device: &Device) -> SupervisionBatch {
+        let mut rng = rand::rngs::StdRng::seed_from_u64(self.seed ^ iteration.wrapping_mul(0xD1B5_4A32_D192_ED03));
+        let m = self.points;
+        let n_state = self.solutions[0].solution.grid.ndim();
+        let n_params = self.solutions[0].params.len();
+        let n_focus = (self.focus_share * m as f64).round() as usize;
+        let (mut tau, mut state, mut params, mut target) =
+            (Vec::with_capacity(m), Vec::with_capacity(m * n_state), Vec::with_capacity(m * n_params), Vec::with_capacity(m));
+        let mut x = vec![0.0; n_state];
+        for i in 0..m {
+            let (a, b, w) = if self.blend_in_beta {
+                let (lo, hi) = (self.solutions[0].params[0], self.solutions[self.solutions.len() - 1].params[0]);
+                let beta = rng.random_range(lo..=hi);
+                let k = self.solutions.partition_point(|s| s.params[0] <= beta).clamp(1, self.solutions.len() - 1);
+                let (a, b) = (&self.solutions[k - 1], &self.solutions[k]);
+                (a, b, f64::from((beta - a.params[0]) / (b.params[0] - a.params[0])))
+            } else {
+                let s = &self.solutions[i % self.solutions.len()];
+                (s, s, 0.0)
+            };
+            let nearer = if w < 0.5 { a } else { b };
+            let grid = &nearer.solution.grid;
+            let flat = if i < n_focus && !nearer.near_minimum.is_empty() {
+                nearer.near_minimum[rng.random_range(0..nearer.near_minimum.len())]
+            } else {
+                rng.random_range(0..nearer.solution.values.len())
+            };
+            grid.point(flat, &mut x);
+            for (xk, axis) in x.iter_mut().zip(grid.axes()) {
+                let moved = *xk + axis.spacing() * rng.random_range(-0.5..0.5);
+                *xk = if axis.periodic {
+                    axis.min + (moved - axis.min).rem_euclid(axis.max - axis.min)
+                } else {
+                    moved.clamp(axis.min, axis.max)
+                };
+            }
+            let value = |s: &Supervised| grid.interpolate(&s.solution.values, &x);
+            tau.push(a.solution.info.horizon as f32);
+            state.extend(x.iter().map(|&v| v as f32));
+            params.extend(a.params.iter().zip(&b.params).map(|(&pa, &pb)| pa + (w as f32) * (pb - pa)));
+            target.push(((1.0 - w) * value(a) + w * value(b)) as f32);
+        }
+        let t2 = |v: Vec<f32>, cols: usize| Tensor::from_data(TensorData::new(v, [m, cols]), device);
+        SupervisionBatch {
+            tau: t2(tau, 1),
+            state: t2(state, n_state),
+            params: t2(params, n_params),
+            target: t2(target, 1),
+        }
+    }
+}
+
+/// Checks that `solution` is of `system`, on (part of) its domain, within the trained horizon.
+fn check_fits(solution: &Solution, system: &AffineSystem, tau_max: f64) -> Result<(), String> {
+    let info = &solution.info;
+    if info.system != system.id {
+        return Err(format!("a solution of system `{}`, training `{}`", info.system, system.id));
+    }
+    if info.horizon > tau_max * (1.0 + 1e-9) {
+        return Err(format!(
+            "horizon {} s lies past sampling.tau_max = {tau_max} s (supervise only inside the trained horizon)",
+            info.horizon
+        ));
+    }
+    let axes = solution.grid.axes();
+    if axes.len() != system.n_state() {
+        return Err(format!("{} grid axes for {} states", axes.len(), system.n_state()));
+    }
+    for (axis, dim) in axes.iter().zip(&system.state) {
+        let slack = 1e-9 * (dim.max - dim.min);
+        if axis.name != dim.name || axis.periodic != dim.periodic {
+            return Err(format!("axis `{}` does not match state `{}`", axis.name, dim.name));
+        }
+        if axis.min < dim.min - slack || axis.max > dim.max + slack {
+            return Err(format!(
+                "axis `{}` spans [{}, {}], outside the domain [{}, {}]",
+                axis.name, axis.min, axis.max, dim.min, dim.max
+            ));
+        }
+    }
+    Ok(())
+}
+
+/// The network's parameters for a solution solved at `solved` (one value per planner bound): the same in
+/// full mode, the shared `beta` in diagonal mode (which needs every bound equal). Each must lie in range.
+fn network_params(solved: &[f64], system: &AffineSystem) -> Result<Vec<f32>, String> {
+    let params: Vec<f64> = if solved.len() == system.n_params() {
+        solved.to_vec()
+    } else if system.n_params() == 1 && solved.windows(2).all(|w| w[0] == w[1]) && !solved.is_empty() {
+        vec![solved[0]]
+    } else {
+        return Err(format!("parameters {solved:?} do not map onto the network's {} parameter(s)", system.n_params()));
+    };
+    for (p, dim) in params.iter().zip(&system.params) {
+        if !(dim.min..=dim.max).contains(p) {
+            return Err(format!("{} = {p} outside the trained range [{}, {}]", dim.name, dim.min, dim.max));
+        }
+    }
+    Ok(params.iter().map(|&p| p as f32).collect())
+}

@@ -1,0 +1,108 @@
+//! Grid supervision: solutions that do not fit the run are refused with the reason, and the drawn targets
+//! are the grid's values where the network is evaluated.
+
+use burn::tensor::Device;
+use fastrack_grid::format::save;
+use fastrack_grid::grid::Grid;
+use fastrack_grid::solver::{solve, Solution, SolverConfig};
+use fastrack_trainer::config::SupervisionConfig;
+use fastrack_trainer::supervision::GridSupervision;
+use fastrack_valuefn::system::{double_integrator, dubins4d, AffineSystem};
+use std::path::{Path, PathBuf};
+
+/// A short solve of `system` at `params` on a coarse grid, saved under `dir`.
+fn solved(dir: &Path, name: &str, system: &AffineSystem, params: &[f64], horizon: f64) -> (PathBuf, Solution) {
+    let resolution = vec![7; system.n_state()];
+    let grid = Grid::for_system(system, &resolution).unwrap();
+    let config = SolverConfig { horizon_cap: horizon, tolerance: 1e-12, ..SolverConfig::default() };
+    let solution = solve(system, params, &grid, &config, false).unwrap();
+    let path = dir.join(name);
+    save(&solution, &path).unwrap();
+    (path, solution)
+}
+
+fn config(solutions: Vec<PathBuf>) -> SupervisionConfig {
+    SupervisionConfig { solutions, weight: 1.0, points: 500, focus_share: 0.5, focus_factor: 2.0 }
+}
+
+fn refusal(config: &SupervisionConfig, system: &AffineSystem, tau_max: f64) -> String {
+    match GridSupervision::load(config, system, tau_max, 1) {
+        Ok(_) => panic!("accepted {:?}", config.solutions),
+        Err(e) => e.to_string(),
+    }
+}
+
+#[test]
+fn solutions_that_do_not_fit_the_run_are_refused_with_the_reason() {
+    let dir = tempfile::tempdir().unwrap();
+    let di = double_integrator::system();
+    let car = dubins4d::system();
+    let shared = car.with_shared_parameter();
+    let (di_path, _) = solved(dir.path(), "di.ftgrid", &di, &[0.75], 0.2);
+    let (unequal, _) = solved(dir.path(), "unequal.ftgrid", &car, &[0.6, 0.9], 0.05);
+
+    let message = refusal(&config(vec![di_path.clone()]), &car, 1.0);
+    assert!(message.contains("system `double_integrator`, training `dubins4d`"), "{message}");
+
+    let message = refusal(&config(vec![di_path.clone()]), &di, 0.1);
+    assert!(message.contains("lies past sampling.tau_max = 0.1 s"), "{message}");
+
+    let message = refusal(&config(vec![unequal.clone()]), &shared, 1.0);
+    assert!(message.contains("do not map onto the network's 1 parameter(s)"), "{message}");
+    assert!(message.contains("unequal.ftgrid"), "the message names the file: {message}");
+
+    // The same unequal solution fits a run with one input per planner bound.
+    assert!(GridSupervision::load(&config(vec![unequal]), &car, 1.0, 1).is_ok());
+
+    let mut narrow = di.clone();
+    narrow.params[0].min = 0.8;
+    let message = refusal(&config(vec![di_path.clone()]), &narrow, 1.0);
+    assert!(message.contains("beta = 0.75 outside the trained range [0.8, 1]"), "{message}");
+
+    // Blending in beta needs one grid and horizon, and distinct beta.
+    let (later, _) = solved(dir.path(), "later.ftgrid", &di, &[1.0], 0.3);
+    let message = refusal(&config(vec![di_path.clone(), later]), &di, 1.0);
+    assert!(message.contains("needs one grid and horizon for every solution"), "{message}");
+    let message = refusal(&config(vec![di_path.clone(), di_path.clone()]), &di, 1.0);
+    assert!(message.contains("a second solution at beta = 0.75"), "{message}");
+
+    let missing = dir.path().join("missing.ftgrid");
+    let message = refusal(&config(vec![missing]), &di, 1.0);
+    assert!(message.contains("missing.ftgrid"), "{message}");
+    std::fs::write(dir.path().join("junk.ftgrid"), b"not a solution").unwrap();
+    let message = refusal(&config(vec![dir.path().join("junk.ftgrid")]), &di, 1.0);
+    assert!(message.contains("magic FTGRID01 missing"), "{message}");
+}
+
+#[test]
+fn drawn_targets_blend_the_grid_values_in_beta_at_the_drawn_points() {
+    let dir = tempfile::tempdir().unwrap();
+    let di = double_integrator::system();
+    let (low, low_solution) = solved(dir.path(), "low.ftgrid", &di, &[0.5], 0.3);
+    let (high, high_solution) = solved(dir.path(), "high.ftgrid", &di, &[1.0], 0.3);
+    // Given out of order: sorted by beta.
+    let supervision = GridSupervision::load(&config(vec![high, low]), &di, 1.0, 7).unwrap();
+    let batch = supervision.batch(3, &Device::flex());
+    let rows = |t: burn::tensor::Tensor<2>| t.into_data().try_to_vec::<f32>().unwrap();
+    let (tau, state, params, target) = (rows(batch.tau), rows(batch.state), rows(batch.params), rows(batch.target));
+    assert_eq!((tau.len(), state.len(), params.len(), target.len()), (500, 1000, 500, 500));
+    let (mut below, mut above) = (0, 0);
+    for i in 0..500 {
+        let beta = f64::from(params[i]);
+        assert!((0.5..=1.0).contains(&beta) && tau[i] == 0.3, "row {i}: beta {beta}, tau {}", tau[i]);
+        let x = [f64::from(state[2 * i]), f64::from(state[2 * i + 1])];
+        assert!(di.in_domain(&x), "row {i}: {x:?} outside the domain");
+        let w = (beta - 0.5) / 0.5;
+        let value = |s: &Solution| s.grid.interpolate(&s.values, &x);
+        let expected = (1.0 - w) * value(&low_solution) + w * value(&high_solution);
+        assert!((f64::from(target[i]) - expected).abs() < 1e-4, "row {i}: target {} vs blend {expected}", target[i]);
+        below += usize::from(beta < 0.75);
+        above += usize::from(beta > 0.75);
+    }
+    assert!(below > 200 && above > 200, "beta drawn across the range: {below} below 0.75, {above} above");
+    // Reproducible per iteration, different across iterations.
+    let again = rows(supervision.batch(3, &Device::flex()).state);
+    let next = rows(supervision.batch(4, &Device::flex()).state);
+    assert_eq!(again, state);
+    assert_ne!(next, state);
+}
