@@ -200,6 +200,10 @@ pub struct SupervisionConfig {
     pub solutions: Vec<PathBuf>,
     /// Weight of the mean squared error to the grid values, added to the residual loss.
     pub weight: f64,
+    /// Weight of the mean squared error of `dV/dr` to the grid's central differences (Sobolev training; the
+    /// control is read off `dV/dr`). Default 0: values only.
+    #[serde(default)]
+    pub gradient_weight: f64,
     /// Grid nodes drawn per iteration.
     pub points: usize,
     /// Share of the nodes drawn from `{V <= focus_factor * V_min}` of their solution (default 0).
@@ -279,6 +283,10 @@ impl TrainConfig {
         if let Some(sup) = &self.supervision {
             ensure!(!sup.solutions.is_empty(), "supervision.solutions must list at least one grid solution file");
             ensure!(sup.weight.is_finite() && sup.weight > 0.0, "supervision.weight must be > 0");
+            ensure!(
+                sup.gradient_weight.is_finite() && sup.gradient_weight >= 0.0,
+                "supervision.gradient_weight must be >= 0"
+            );
             ensure!(sup.points > 0, "supervision.points must be > 0");
             ensure!((0.0..=1.0).contains(&sup.focus_share), "supervision.focus_share must be in [0, 1]");
             ensure!(sup.focus_factor.is_finite() && sup.focus_factor >= 1.0, "supervision.focus_factor must be >= 1");

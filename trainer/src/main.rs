@@ -189,6 +189,7 @@ fn main() -> anyhow::Result<()> {
                     ("boundary".into(), losses[1]),
                     ("residual".into(), losses[2]),
                     ("supervision".into(), losses[3]),
+                    ("supervision_gradient".into(), losses[4]),
                 ]),
                 state.wall_time_s,
             );

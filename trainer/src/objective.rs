@@ -24,6 +24,8 @@ pub struct LossTerms {
     pub residual: f64,
     /// Mean squared error to the grid values (0 without supervision).
     pub supervision: f64,
+    /// Mean squared error of `dV/dr` to the grid's (summed over the state axes; 0 unless supervised).
+    pub supervision_gradient: f64,
 }
 
 /// `V`, its derivatives and `l` on a batch.
@@ -61,8 +63,8 @@ pub struct Objective {
     periodic: Vec<(usize, f64, f64)>,
     /// Multiplies the Hamiltonian: 1 always, except in tests showing that a wrong sign fails.
     pub hamiltonian_sign: f64,
-    /// Grid supervision and its weight, if configured.
-    supervision: Option<(GridSupervision, f64)>,
+    /// Grid supervision, if configured.
+    supervision: Option<GridSupervision>,
 }
 
 impl Objective {
@@ -109,15 +111,33 @@ impl Objective {
         }
     }
 
-    /// Adds the grid-supervision term, weighted by `weight`.
-    pub fn with_supervision(self, supervision: GridSupervision, weight: f64) -> Self {
-        Self { supervision: Some((supervision, weight)), ..self }
+    /// Adds the grid-supervision terms.
+    pub fn with_supervision(self, supervision: GridSupervision) -> Self {
+        Self { supervision: Some(supervision), ..self }
     }
 
-    /// Mean squared error of `V` to the grid values drawn at `iteration`.
-    fn supervision_error(&self, supervision: &GridSupervision, model: &Siren, iteration: u64, device: &Device) -> Tensor<1> {
+    /// Mean squared errors of `V` and (when its weight is positive) of `dV/dr` to the grid targets drawn at
+    /// `iteration`.
+    fn supervision_errors(
+        &self,
+        supervision: &GridSupervision,
+        model: &Siren,
+        iteration: u64,
+        device: &Device,
+    ) -> (Tensor<1>, Option<Tensor<1>>) {
         let batch = supervision.batch(iteration, device);
-        (self.value_at(model, batch.tau, batch.state, batch.params) - batch.target).powi_scalar(2).mean()
+        if supervision.gradient_weight <= 0.0 {
+            let value = self.value_at(model, batch.tau, batch.state, batch.params);
+            return ((value - batch.target).powi_scalar(2).mean(), None);
+        }
+        let input = (Tensor::cat(vec![batch.tau.clone(), batch.state.clone(), batch.params.clone()], 1)
+            - self.input_center.clone())
+        .mul(self.input_inv_half_range.clone());
+        let points =
+            Batch { tau: batch.tau, state: batch.state, params: batch.params, input, n_boundary: 0, tau_limit: 0.0 };
+        let v = self.value_terms(model, &points);
+        let gradient_error = (v.d_state - batch.target_gradient).powi_scalar(2).sum_dim(1).mean();
+        ((v.value - batch.target).powi_scalar(2).mean(), Some(gradient_error))
     }
 
     /// `V`, `dV/dtau`, `dV/dr` and `l` in physical units.
@@ -263,18 +283,23 @@ impl Objective {
             }
         };
         let scalar = |t: Tensor<1>| f64::from(t.into_scalar::<f32>());
-        let (total, supervision) = match &self.supervision {
-            Some((grid, weight)) => {
-                let error = self.supervision_error(grid, model, iteration, &batch.tau.device());
-                (total + error.clone().mul_scalar(*weight), Some(error))
+        let (total, supervision, supervision_gradient) = match &self.supervision {
+            Some(grid) => {
+                let (value, gradient) = self.supervision_errors(grid, model, iteration, &batch.tau.device());
+                let total = total + value.clone().mul_scalar(grid.weight);
+                match gradient {
+                    Some(g) => (total + g.clone().mul_scalar(grid.gradient_weight), Some(value), Some(g)),
+                    None => (total, Some(value), None),
+                }
             }
-            None => (total, None),
+            None => (total, None, None),
         };
         let terms = LossTerms {
             total: scalar(total.clone()),
             boundary: boundary.map_or(0.0, scalar),
             residual: scalar(residual),
             supervision: supervision.map_or(0.0, scalar),
+            supervision_gradient: supervision_gradient.map_or(0.0, scalar),
         };
         (total, terms)
     }

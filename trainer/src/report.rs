@@ -6,11 +6,11 @@ use fastrack_valuefn::manifest::TebRow;
 use fastrack_valuefn::plot::{line_chart, Chart, Series};
 use std::path::{Path, PathBuf};
 
-/// Draws `<run>/losses.png` (total, boundary, residual and grid-supervision loss against iteration, log
+/// Draws `<run>/losses.png` (total, boundary, residual and grid-supervision losses against iteration, log
 /// scale; terms that stay 0 are left out).
 pub fn plot_losses(run: &RunDir) -> anyhow::Result<PathBuf> {
     let text = std::fs::read_to_string(run.losses()).with_context(|| format!("reading {}", run.losses().display()))?;
-    let mut series: Vec<Series> = ["loss", "boundary", "residual", "supervision"]
+    let mut series: Vec<Series> = ["loss", "boundary", "residual", "supervision", "supervision_gradient"]
         .iter()
         .map(|name| Series { label: (*name).into(), points: Vec::new(), markers: false })
         .collect();

@@ -49,6 +49,8 @@ pub struct SupervisionBatch {
     pub params: Tensor<2>,
     /// Grid values `[M, 1]`.
     pub target: Tensor<2>,
+    /// The grid's `dV/dr` `[M, n_state]`: central differences of the interpolated values over one cell.
+    pub target_gradient: Tensor<2>,
 }
 
 /// Grid solutions and how many points each iteration draws.
@@ -60,6 +62,10 @@ pub struct GridSupervision {
     points: usize,
     focus_share: f64,
     seed: u64,
+    /// Weight of the value error.
+    pub weight: f64,
+    /// Weight of the `dV/dr` error (0: values only).
+    pub gradient_weight: f64,
 }
 
 impl GridSupervision {
@@ -81,9 +87,8 @@ impl GridSupervision {
                 check_fits(&solution, system, tau_max).map_err(mismatch)?;
                 let params = network_params(&solution.info.params, system).map_err(mismatch)?;
                 let v_min = solution.values.iter().copied().fold(f64::INFINITY, f64::min);
-                let near_minimum = (0..solution.values.len())
-                    .filter(|&i| solution.values[i] <= config.focus_factor * v_min)
-                    .collect();
+                let near_minimum =
+                    (0..solution.values.len()).filter(|&i| solution.values[i] <= config.focus_factor * v_min).collect();
                 Ok((path.clone(), Supervised { solution, params, near_minimum }))
             })
             .collect::<Result<Vec<_>, SupervisionError>>()?;
@@ -93,7 +98,9 @@ impl GridSupervision {
             let (first_path, first) = &solutions[0];
             for (path, s) in &solutions[1..] {
                 let mismatch = |problem: String| SupervisionError::Mismatch { path: path.clone(), problem };
-                if s.solution.grid.axes() != first.solution.grid.axes() || s.solution.info.horizon != first.solution.info.horizon {
+                if s.solution.grid.axes() != first.solution.grid.axes()
+                    || s.solution.info.horizon != first.solution.info.horizon
+                {
                     return Err(mismatch(format!(
                         "blending in beta needs one grid and horizon for every solution; {} differs",
                         first_path.display()
@@ -118,7 +125,15 @@ impl GridSupervision {
             );
         }
         let solutions = solutions.into_iter().map(|(_, s)| s).collect();
-        Ok(Self { solutions, blend_in_beta, points: config.points, focus_share: config.focus_share, seed })
+        Ok(Self {
+            solutions,
+            blend_in_beta,
+            points: config.points,
+            focus_share: config.focus_share,
+            seed,
+            weight: config.weight,
+            gradient_weight: config.gradient_weight,
+        })
     }
 
     /// The targets drawn at `iteration` (reproducible from the seed).
@@ -136,8 +151,13 @@ impl GridSupervision {
         let n_state = self.solutions[0].solution.grid.ndim();
         let n_params = self.solutions[0].params.len();
         let n_focus = (self.focus_share * m as f64).round() as usize;
-        let (mut tau, mut state, mut params, mut target) =
-            (Vec::with_capacity(m), Vec::with_capacity(m * n_state), Vec::with_capacity(m * n_params), Vec::with_capacity(m));
+        let (mut tau, mut state, mut params, mut target) = (
+            Vec::with_capacity(m),
+            Vec::with_capacity(m * n_state),
+            Vec::with_capacity(m * n_params),
+            Vec::with_capacity(m),
+        );
+        let mut target_gradient = Vec::with_capacity(m * n_state);
         let mut x = vec![0.0; n_state];
         for i in 0..m {
             let (a, b, w) = if self.blend_in_beta {
@@ -171,6 +191,10 @@ impl GridSupervision {
             state.extend(x.iter().map(|&v| v as f32));
             params.extend(a.params.iter().zip(&b.params).map(|(&pa, &pb)| pa + (w as f32) * (pb - pa)));
             target.push(((1.0 - w) * value(a) + w * value(b)) as f32);
+            for k in 0..n_state {
+                let gradient = |s: &Supervised| central_difference(&s.solution, &x, k);
+                target_gradient.push(((1.0 - w) * gradient(a) + w * gradient(b)) as f32);
+            }
         }
         let t2 = |v: Vec<f32>, cols: usize| Tensor::from_data(TensorData::new(v, [m, cols]), device);
         SupervisionBatch {
@@ -178,8 +202,25 @@ impl GridSupervision {
             state: t2(state, n_state),
             params: t2(params, n_params),
             target: t2(target, 1),
+            target_gradient: t2(target_gradient, n_state),
         }
     }
+}
+
+/// `dV/dr_k` of `solution`'s interpolant at `x`: the difference over one cell centred on `x` (one-sided where
+/// a non-periodic edge cuts the cell).
+fn central_difference(solution: &Solution, x: &[f64], k: usize) -> f64 {
+    let axis = &solution.grid.axes()[k];
+    let half = 0.5 * axis.spacing();
+    let (mut plus, mut minus) = (x.to_vec(), x.to_vec());
+    plus[k] += half;
+    minus[k] -= half;
+    if !axis.periodic {
+        plus[k] = plus[k].min(axis.max);
+        minus[k] = minus[k].max(axis.min);
+    }
+    let grid = &solution.grid;
+    (grid.interpolate(&solution.values, &plus) - grid.interpolate(&solution.values, &minus)) / (plus[k] - minus[k])
 }
 
 /// Checks that `solution` is of `system`, on (part of) its domain, within the trained horizon.

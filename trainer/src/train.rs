@@ -30,8 +30,8 @@ pub struct RunState {
     pub iteration: u64,
     /// Training wall time so far (s), over all sessions.
     pub wall_time_s: f64,
-    /// Loss terms of the last iteration: total, boundary, residual, grid supervision.
-    pub last_losses: Option<[f64; 4]>,
+    /// Loss terms of the last iteration: total, boundary, residual, grid supervision of `V` and of `dV/dr`.
+    pub last_losses: Option<[f64; 5]>,
 }
 
 /// Files of a run directory.
@@ -142,7 +142,7 @@ pub fn train(config: &TrainConfig, device: &Device, session: Session<'_>) -> any
         let mut o = Objective::new(config, &system, &network.input, device);
         o.hamiltonian_sign = session.hamiltonian_sign;
         match &config.supervision {
-            Some(s) => o.with_supervision(GridSupervision::load(s, &system, config.sampling.tau_max, config.seed)?, s.weight),
+            Some(s) => o.with_supervision(GridSupervision::load(s, &system, config.sampling.tau_max, config.seed)?),
             None => o,
         }
     };
@@ -175,13 +175,14 @@ pub fn train(config: &TrainConfig, device: &Device, session: Session<'_>) -> any
         let grads = GradientsParams::from_grads(loss.backward(), &model);
         model = optimizer.step(config.learning_rate(it), model, grads);
         state.iteration += 1;
-        state.last_losses = Some([terms.total, terms.boundary, terms.residual, terms.supervision]);
+        state.last_losses =
+            Some([terms.total, terms.boundary, terms.residual, terms.supervision, terms.supervision_gradient]);
         state.wall_time_s = wall_before + session_start.elapsed().as_secs_f64();
         if it.is_multiple_of(10) || state.iteration == end {
             write_log_line(&mut log, it, &terms, config.tau_limit(it), config.learning_rate(it), state.wall_time_s)?;
             bar.set_message(format!(
-                "loss {:.3e} (bc {:.2e}, hji {:.2e}, grid {:.2e})",
-                terms.total, terms.boundary, terms.residual, terms.supervision
+                "loss {:.3e} (bc {:.2e}, hji {:.2e}, grid {:.2e}, grid dV/dr {:.2e})",
+                terms.total, terms.boundary, terms.residual, terms.supervision, terms.supervision_gradient
             ));
         }
         bar.set_position(state.iteration);
@@ -205,7 +206,7 @@ fn write_log_line(
 ) -> anyhow::Result<()> {
     let line = serde_json::json!({
         "iteration": it, "loss": terms.total, "boundary": terms.boundary, "residual": terms.residual,
-        "supervision": terms.supervision,
+        "supervision": terms.supervision, "supervision_gradient": terms.supervision_gradient,
         "tau_limit": tau, "learning_rate": lr, "wall_time_s": wall,
     });
     writeln!(log, "{line}")?;

@@ -22,7 +22,7 @@ fn solved(dir: &Path, name: &str, system: &AffineSystem, params: &[f64], horizon
 }
 
 fn config(solutions: Vec<PathBuf>) -> SupervisionConfig {
-    SupervisionConfig { solutions, weight: 1.0, points: 500, focus_share: 0.5, focus_factor: 2.0 }
+    SupervisionConfig { solutions, weight: 1.0, gradient_weight: 0.0, points: 500, focus_share: 0.5, focus_factor: 2.0 }
 }
 
 fn refusal(config: &SupervisionConfig, system: &AffineSystem, tau_max: f64) -> String {
@@ -105,4 +105,37 @@ fn drawn_targets_blend_the_grid_values_in_beta_at_the_drawn_points() {
     let next = rows(supervision.batch(4, &Device::flex()).state);
     assert_eq!(again, state);
     assert_ne!(next, state);
+}
+
+#[test]
+fn targets_of_a_linear_field_are_its_values_and_its_slope_up_to_the_edges() {
+    // Multilinear interpolation and differences over a cell are exact on a linear field, edges included.
+    let dir = tempfile::tempdir().unwrap();
+    let di = double_integrator::system();
+    let slope = [0.7, -1.3];
+    let (_, mut solution) = solved(dir.path(), "field.ftgrid", &di, &[0.8], 0.2);
+    let mut r = [0.0; 2];
+    for flat in 0..solution.values.len() {
+        solution.grid.point(flat, &mut r);
+        solution.values[flat] = 2.0 + slope[0] * r[0] + slope[1] * r[1];
+    }
+    let path = dir.path().join("linear.ftgrid");
+    save(&solution, &path).unwrap();
+    let supervision = GridSupervision::load(&config(vec![path]), &di, 1.0, 5).unwrap();
+    let batch = supervision.batch(0, &Device::flex());
+    let rows = |t: burn::tensor::Tensor<2>| t.into_data().try_to_vec::<f32>().unwrap();
+    let (state, target, gradient) = (rows(batch.state), rows(batch.target), rows(batch.target_gradient));
+    let mut at_edge = 0;
+    for i in 0..500 {
+        let x = [f64::from(state[2 * i]), f64::from(state[2 * i + 1])];
+        let expected = 2.0 + slope[0] * x[0] + slope[1] * x[1];
+        assert!((f64::from(target[i]) - expected).abs() < 1e-4, "row {i}: value {} vs {expected}", target[i]);
+        for k in 0..2 {
+            let g = f64::from(gradient[2 * i + k]);
+            assert!((g - slope[k]).abs() < 1e-4, "row {i}, axis {k}: slope {g} vs {}", slope[k]);
+        }
+        at_edge +=
+            usize::from(x.iter().zip(&di.state).any(|(x, d)| (x - d.min).abs() < 0.33 || (d.max - x).abs() < 0.33));
+    }
+    assert!(at_edge > 50, "only {at_edge} rows within half a cell of an edge");
 }
