@@ -17,7 +17,7 @@ for _ in $(seq 1 100); do
   sleep 0.2
 done
 fastrack() { echo; echo "\$ fastrack $*"; ./target/debug/fastrack "$@"; }
-model=$(./target/debug/fastrack models --json | python3 -c 'import json,sys; m=[x for x in json.load(sys.stdin) if x["default_version"]]; print(m[0]["name"])')
+model=${FASTRACK_DEMO_MODEL:-dubins4d}   # the trained model; untrained-dubins4d is the seeded stand-in
 fastrack health
 fastrack models
 fastrack model "$model"

@@ -89,6 +89,19 @@ enum Command {
         #[arg(long, default_value = "models")]
         out: PathBuf,
     },
+    /// Draws a bundle's TEB table (served level, measured `V_min`) against `beta`, with grid solutions'
+    /// `V_min` beside it.
+    PlotTeb {
+        /// The bundle's version folder, e.g. `models/dubins4d/1`.
+        #[arg(long)]
+        bundle: PathBuf,
+        /// Grid solution files (`.ftgrid`) whose `V_min` is drawn as the reference.
+        #[arg(long = "grid-solution")]
+        grid_solutions: Vec<PathBuf>,
+        /// The PNG to write.
+        #[arg(long)]
+        out: PathBuf,
+    },
 }
 
 /// The burn device for a name.
@@ -170,6 +183,20 @@ fn main() -> anyhow::Result<()> {
             );
         }
         Command::Bench { config, out } => run_bench(&TrainConfig::load(&config)?, &out)?,
+        Command::PlotTeb { bundle, grid_solutions, out } => {
+            let manifest = fastrack_valuefn::bundle::Bundle::load(&bundle)?.manifest;
+            let mut grid = grid_solutions
+                .iter()
+                .map(|path| {
+                    let solution = fastrack_grid::format::load(path)?;
+                    let beta = solution.info.params.first().copied().context("a solution without parameters")?;
+                    Ok((beta, solution.values.iter().copied().fold(f64::INFINITY, f64::min)))
+                })
+                .collect::<anyhow::Result<Vec<_>>>()?;
+            grid.sort_by(|a, b| a.0.total_cmp(&b.0));
+            fastrack_trainer::report::plot_teb(&out, &manifest.teb_table, &[("grid V_min", grid)])?;
+            println!("{}", out.display());
+        }
         Command::Export { run_dir, out } => {
             let run = RunDir(run_dir);
             let (network, state) = checkpoint_network(&run, &burn::tensor::Device::flex())?;
