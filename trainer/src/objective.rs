@@ -1,6 +1,7 @@
 //! The training loss: the HJI variational inequality in horizon form,
 //! `0 = min{V - l, dV/dtau - H(r, dV/dr; beta)}`, in the paper's form or with the exact boundary condition,
-//! as a differential or a semi-Lagrangian residual.
+//! as a differential or a semi-Lagrangian residual, plus the optional grid-supervision terms
+//! (`crate::supervision`).
 
 use crate::causal::causal_weights;
 use crate::config::{LossForm, Residual, ResidualNorm, TrainConfig};

@@ -1,10 +1,11 @@
-//! Supervision by grid solutions (optional): beside the HJI residual, the network's value at each
-//! solution's horizon is pulled towards the grid solver's values at that solution's nodes.
+//! Supervision by grid solutions (optional): beside the HJI residual, the network's value (and optionally
+//! `dV/dr`) at each solution's horizon is pulled towards the grid solution's interpolant, at points drawn
+//! within its cells and, with one network parameter, at any `beta` between two solutions.
 //!
 //! The residual alone does not hold the kink at the value's minimum (README, "Where training stands"), so
-//! the learned bound drifts; ground-truth values where a grid solver can compute them (dubins4d whole, the
-//! 13-D quadcopter through its exact 4-D/4-D/2-D split) anchor it, and the residual shapes the network
-//! between the supervised `beta` and horizons.
+//! the learned bound drifts; ground truth where a grid solver can compute it (dubins4d whole, the 13-D
+//! quadcopter through its exact 4-D/4-D/2-D split) anchors it. The residual still shapes the shorter
+//! horizons, which the served graph (fixed at `tau_max`) does not use.
 
 use crate::config::SupervisionConfig;
 use burn::tensor::{Device, Tensor, TensorData};
@@ -43,7 +44,7 @@ struct Supervised {
 pub struct SupervisionBatch {
     /// Horizon `[M, 1]` (each solution's own).
     pub tau: Tensor<2>,
-    /// Relative states `[M, n_state]` (grid nodes).
+    /// Relative states `[M, n_state]` (within the grid's cells).
     pub state: Tensor<2>,
     /// Parameters `[M, n_params]`.
     pub params: Tensor<2>,
@@ -115,6 +116,14 @@ impl GridSupervision {
             }
         }
         for (path, s) in &solutions {
+            if s.solution.info.horizon != tau_max {
+                tracing::warn!(
+                    file = %path.display(),
+                    horizon = s.solution.info.horizon,
+                    tau_max,
+                    "a solution supervises a horizon other than sampling.tau_max, the one the exported graph serves"
+                );
+            }
             tracing::info!(
                 file = %path.display(),
                 params = ?s.params,

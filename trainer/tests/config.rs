@@ -20,7 +20,7 @@ fn load(text: &str) -> Result<TrainConfig, String> {
 
 #[test]
 fn shipped_configs_are_valid() {
-    for name in ["double_integrator", "dubins4d"] {
+    for name in ["double_integrator", "double_integrator_supervised", "dubins4d", "dubins4d_unsupervised"] {
         let path = Path::new(env!("CARGO_MANIFEST_DIR")).join(format!("configs/{name}.toml"));
         TrainConfig::load(&path).unwrap_or_else(|e| panic!("{name}: {e:#}"));
     }
@@ -50,6 +50,27 @@ fn bad_configs_name_what_is_wrong() {
     for (from, to, expected) in cases {
         assert!(base.contains(from), "fixture lacks {from:?}");
         let err = load(&base.replacen(from, to, 1)).expect_err(expected);
+        assert!(err.contains(expected), "{to:?}: error {err:?} lacks {expected:?}");
+    }
+}
+
+#[test]
+fn bad_supervision_sections_name_what_is_wrong() {
+    let good = "\n[supervision]\nsolutions = [\"a.ftgrid\"]\nweight = 1.0\npoints = 10\n";
+    let base = base_text() + good;
+    assert!(load(&base).is_ok());
+    let cases = [
+        ("solutions = [\"a.ftgrid\"]", "solutions = []", "supervision.solutions must list at least one"),
+        ("weight = 1.0", "weight = 0.0", "supervision.weight must be > 0"),
+        ("weight = 1.0", "weight = 1.0\ngradient_weight = -1.0", "supervision.gradient_weight must be >= 0"),
+        ("points = 10", "points = 0", "supervision.points must be > 0"),
+        ("points = 10", "points = 10\nfocus_share = 1.5", "supervision.focus_share must be in [0, 1]"),
+        ("points = 10", "points = 10\nfocus_factor = 0.5", "supervision.focus_factor must be >= 1"),
+    ];
+    let section = base.rfind("[supervision]").unwrap();
+    for (from, to, expected) in cases {
+        let edited = format!("{}{}", &base[..section], base[section..].replacen(from, to, 1));
+        let err = load(&edited).expect_err(expected);
         assert!(err.contains(expected), "{to:?}: error {err:?} lacks {expected:?}");
     }
 }
