@@ -191,8 +191,8 @@ pub struct OptimizerConfig {
     pub gradient_clip_norm: Option<f64>,
 }
 
-/// Grid solutions (`.ftgrid`, written by `fastrack-grid`) whose values supervise the network at their
-/// horizon; see `crate::supervision`.
+/// Grid solutions (`.ftgrid`, written by `fastrack-grid`) whose values (and optionally `dV/dr`) supervise the
+/// network at their horizon; see `crate::supervision`.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SupervisionConfig {
@@ -204,7 +204,7 @@ pub struct SupervisionConfig {
     /// control is read off `dV/dr`). Default 0: values only.
     #[serde(default)]
     pub gradient_weight: f64,
-    /// Grid nodes drawn per iteration.
+    /// Targets drawn per iteration.
     pub points: usize,
     /// Share of the nodes drawn from `{V <= focus_factor * V_min}` of their solution (default 0).
     #[serde(default)]

@@ -201,7 +201,8 @@ fn main() -> anyhow::Result<()> {
             let run = RunDir(run_dir);
             let (network, state) = checkpoint_network(&run, &burn::tensor::Device::flex())?;
             let system = state.config.system()?;
-            let losses = state.last_losses.unwrap_or_default();
+            let losses = state.last_losses.clone().unwrap_or_default();
+            let loss = |i: usize| losses.get(i).copied().unwrap_or(0.0);
             let provenance = Provenance::here_and_now(
                 format!(
                     "DeepReach ({:?} loss, {:?} parameters{}), burn",
@@ -212,11 +213,11 @@ fn main() -> anyhow::Result<()> {
                 serde_json::to_value(&state.config)?,
                 state.iteration,
                 BTreeMap::from([
-                    ("total".into(), losses[0]),
-                    ("boundary".into(), losses[1]),
-                    ("residual".into(), losses[2]),
-                    ("supervision".into(), losses[3]),
-                    ("supervision_gradient".into(), losses[4]),
+                    ("total".into(), loss(0)),
+                    ("boundary".into(), loss(1)),
+                    ("residual".into(), loss(2)),
+                    ("supervision".into(), loss(3)),
+                    ("supervision_gradient".into(), loss(4)),
                 ]),
                 state.wall_time_s,
             );

@@ -30,8 +30,9 @@ pub struct RunState {
     pub iteration: u64,
     /// Training wall time so far (s), over all sessions.
     pub wall_time_s: f64,
-    /// Loss terms of the last iteration: total, boundary, residual, grid supervision of `V` and of `dV/dr`.
-    pub last_losses: Option<[f64; 5]>,
+    /// Loss terms of the last iteration: total, boundary, residual, grid supervision of `V` and of `dV/dr`
+    /// (checkpoints written before supervision existed hold the first three).
+    pub last_losses: Option<Vec<f64>>,
 }
 
 /// Files of a run directory.
@@ -176,7 +177,7 @@ pub fn train(config: &TrainConfig, device: &Device, session: Session<'_>) -> any
         model = optimizer.step(config.learning_rate(it), model, grads);
         state.iteration += 1;
         state.last_losses =
-            Some([terms.total, terms.boundary, terms.residual, terms.supervision, terms.supervision_gradient]);
+            Some(vec![terms.total, terms.boundary, terms.residual, terms.supervision, terms.supervision_gradient]);
         state.wall_time_s = wall_before + session_start.elapsed().as_secs_f64();
         if it.is_multiple_of(10) || state.iteration == end {
             write_log_line(&mut log, it, &terms, config.tau_limit(it), config.learning_rate(it), state.wall_time_s)?;
