@@ -5,7 +5,7 @@
 use fastrack_grid::compare::learned_on_grid;
 use fastrack_grid::grid::Grid;
 use fastrack_grid::solver::{solve, SolverConfig};
-use fastrack_valuefn::network::ValueNetwork;
+use fastrack_valuefn::network::{NetworkShape, ValueNetwork};
 use fastrack_valuefn::onnx_writer::write_value_graph;
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
 use fastrack_valuefn::system::{dubins4d, for_bundle};
@@ -20,7 +20,7 @@ fn a_diagonal_bundle_is_evaluated_at_the_solutions_beta() {
 
     let shared = for_bundle(dubins4d::ID, 1).unwrap();
     assert_eq!((shared.n_params(), shared.planner_input_param.clone()), (1, vec![0, 0]));
-    let network = ValueNetwork::random(&shared, &[16, 16], 30.0, horizon, true, 9);
+    let network = ValueNetwork::random(&shared, &NetworkShape::new(&[16, 16], 30.0, true), horizon, 9);
     let onnx = write_value_graph(&network, &shared, horizon);
     let dims = GraphDims { n_state: 4, n_params: 1, n_control: 2 };
     let evaluator = Evaluator::new(runtime(None).unwrap(), &onnx, dims, 1).unwrap();

@@ -13,7 +13,7 @@ use fastrack_grid::solver::{solve, Solution, SolverConfig};
 use fastrack_grid::verify::{required_samples, verify_table, VerifyOptions};
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::manifest::{Manifest, NetworkInfo, Provenance, SystemInfo, TebRow, MIN_TEB_ROWS, SCHEMA_VERSION};
-use fastrack_valuefn::network::{Dense, ValueNetwork};
+use fastrack_valuefn::network::{Dense, PeriodicEncoding, ValueNetwork};
 use fastrack_valuefn::onnx_writer::write_value_graph;
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
 use fastrack_valuefn::system::double_integrator::system;
@@ -93,6 +93,7 @@ fn fitted_network(system: &AffineSystem, solution: &Solution, scale: f64) -> Val
         exact_boundary: false,
         periodic: vec![None; system.n_state()],
         error_coords: system.error_coords.clone(),
+        periodic_encoding: PeriodicEncoding::Wrap,
     }
 }
 
@@ -123,7 +124,13 @@ fn write_bundle(
         params,
         controls,
         horizon: HORIZON,
-        network: NetworkInfo { kind: "siren".into(), hidden: vec![FEATURES], omega_0: 1.0, exact_boundary: false },
+        network: NetworkInfo {
+            kind: "siren".into(),
+            hidden: vec![FEATURES],
+            omega_0: 1.0,
+            exact_boundary: false,
+            periodic_encoding: PeriodicEncoding::Wrap,
+        },
         teb_table,
         untrained: false,
         provenance: Provenance {

@@ -20,6 +20,7 @@ pub fn model_info(m: &Manifest) -> pb::ModelInfo {
                 bounds: interval(d.min, d.max),
                 periodic: d.periodic,
                 error_coordinate: d.error_coordinate,
+                limits: d.limits.map(|[low, high]| pb::Interval { min: low, max: high }),
             })
             .collect(),
         params: m

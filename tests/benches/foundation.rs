@@ -8,7 +8,7 @@
 use anyhow::Context;
 use fastrack_client::{model_ref, pb};
 use fastrack_e2e::{write_network_bundle, TestServer, TEST_HORIZON};
-use fastrack_valuefn::network::ValueNetwork;
+use fastrack_valuefn::network::{NetworkShape, ValueNetwork};
 use fastrack_valuefn::onnx_writer::write_value_graph;
 use fastrack_valuefn::record::{write_record, Table};
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
@@ -58,7 +58,7 @@ fn percentile(sorted: &[f64], q: f64) -> f64 {
 
 fn main() -> anyhow::Result<()> {
     let system = dubins4d::system();
-    let network = ValueNetwork::random(&system, &[256, 256, 256], 30.0, TEST_HORIZON, true, 1);
+    let network = ValueNetwork::random(&system, &NetworkShape::new(&[256, 256, 256], 30.0, true), TEST_HORIZON, 1);
     let onnx = write_value_graph(&network, &system, TEST_HORIZON);
     let rt = runtime(None)?;
     let dims = GraphDims { n_state: 4, n_params: 2, n_control: 2 };

@@ -5,7 +5,7 @@
 use fastrack_client::{ClientOptions, FastrackClient};
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::manifest::{Manifest, NetworkInfo, Provenance, SystemInfo, TebRow, SCHEMA_VERSION};
-use fastrack_valuefn::network::ValueNetwork;
+use fastrack_valuefn::network::{NetworkShape, ValueNetwork};
 use fastrack_valuefn::onnx_writer::write_value_graph;
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
 use fastrack_valuefn::system::AffineSystem;
@@ -36,7 +36,7 @@ pub fn hand_made_table(system: &AffineSystem) -> Vec<TebRow> {
 
 /// A test bundle's network (small, seeded).
 pub fn test_network(system: &AffineSystem, seed: u64) -> ValueNetwork {
-    let mut network = ValueNetwork::random(system, &[32, 32], 30.0, TEST_HORIZON, true, seed);
+    let mut network = ValueNetwork::random(system, &NetworkShape::new(&[32, 32], 30.0, true), TEST_HORIZON, seed);
     network.output_offset = 0.5;
     network
 }
@@ -66,12 +66,7 @@ pub fn write_network_bundle(
         params,
         controls,
         horizon: TEST_HORIZON,
-        network: NetworkInfo {
-            kind: "siren".into(),
-            hidden: network.hidden_widths(),
-            omega_0: 30.0,
-            exact_boundary: true,
-        },
+        network: NetworkInfo::describe(network),
         teb_table: hand_made_table(system),
         untrained: true,
         provenance: Provenance {

@@ -3,7 +3,7 @@
 
 use fastrack_client::{model_ref, pb, ClientError};
 use fastrack_e2e::{write_network_bundle, TestServer, TEST_HORIZON};
-use fastrack_valuefn::network::ValueNetwork;
+use fastrack_valuefn::network::{NetworkShape, ValueNetwork};
 use fastrack_valuefn::system::dubins4d;
 use std::time::{Duration, Instant};
 
@@ -19,7 +19,7 @@ fn big_request() -> (Vec<f64>, Vec<f64>) {
 async fn a_flood_is_shed_quickly_and_admitted_calls_meet_their_deadlines() {
     let repo = tempfile::tempdir().unwrap();
     let system = dubins4d::system();
-    let network = ValueNetwork::random(&system, &[256, 256, 256], 30.0, TEST_HORIZON, true, 7);
+    let network = ValueNetwork::random(&system, &NetworkShape::new(&[256, 256, 256], 30.0, true), TEST_HORIZON, 7);
     write_network_bundle(repo.path(), &system, "dubins-big", 1, &network);
     // One compute thread and room for two queued requests.
     let capacity = (2 * ITEMS).to_string();

@@ -1,6 +1,7 @@
 //! The training configuration: one TOML file holds every hyperparameter; validated before any work.
 
 use anyhow::{bail, ensure, Context};
+use fastrack_valuefn::network::PeriodicEncoding;
 use fastrack_valuefn::system::{by_id, AffineSystem, SYSTEM_IDS};
 use serde::{Deserialize, Serialize};
 use std::path::{Path, PathBuf};
@@ -106,6 +107,10 @@ pub struct NetworkConfig {
     /// default initialisation resolves (the exported network keeps one `omega_0`).
     #[serde(default = "default_first_layer_scale")]
     pub first_layer_scale: f64,
+    /// How periodic coordinates (the heading) enter the network: `circle` (default; `(cos, sin)`, periodic by
+    /// construction) or `wrap` (the wrapped angle as one input, as every run before the eighth session).
+    #[serde(default)]
+    pub periodic_encoding: PeriodicEncoding,
 }
 
 fn default_first_layer_scale() -> f64 {
@@ -249,7 +254,7 @@ impl TrainConfig {
 
     /// Checks every field before any work starts.
     pub fn validate(&self) -> anyhow::Result<()> {
-        self.system()?;
+        self.system()?.check_limits().map_err(anyhow::Error::msg).context("the system's state limits")?;
         let n = &self.network;
         ensure!(!n.hidden.is_empty(), "network.hidden must list at least one layer");
         ensure!(!n.hidden.contains(&0), "network.hidden widths must be > 0, got {:?}", n.hidden);

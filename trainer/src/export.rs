@@ -36,6 +36,9 @@ pub struct ExportRequest<'a> {
 /// Largest relative difference between served and network values accepted on reload.
 const RELOAD_TOLERANCE: f64 = 1e-4;
 
+/// Largest difference between served and network `dV/dr` accepted on reload, relative to `max(|dV/dr|, 1)`.
+const GRADIENT_TOLERANCE: f64 = 1e-3;
+
 /// Writes `<root>/<name>/<version>/` and returns the folder.
 pub fn export(root: &Path, request: ExportRequest<'_>) -> anyhow::Result<PathBuf> {
     let ExportRequest { network, system, horizon, .. } = request;
@@ -58,12 +61,7 @@ pub fn export(root: &Path, request: ExportRequest<'_>) -> anyhow::Result<PathBuf
         params,
         controls,
         horizon,
-        network: NetworkInfo {
-            kind: "siren".into(),
-            hidden: network.hidden_widths(),
-            omega_0: network.omega_0,
-            exact_boundary: network.exact_boundary,
-        },
+        network: NetworkInfo::describe(network),
         teb_table: report.rows,
         untrained: request.untrained,
         provenance: request.provenance,
@@ -92,15 +90,36 @@ fn check_reload(
         (0..n).flat_map(|_| system.params.iter().map(|p| rng.random_range(p.min..p.max)).collect::<Vec<_>>()).collect();
     let to_f32 = |v: &[f64]| v.iter().map(|&x| x as f32).collect::<Vec<_>>();
     let served = evaluator.evaluate(&to_f32(&states), &to_f32(&params))?;
-    let worst = (0..n)
-        .map(|i| {
-            let s = &states[i * dims.n_state..(i + 1) * dims.n_state];
-            let p = &params[i * dims.n_params..(i + 1) * dims.n_params];
-            let reference = network.evaluate(horizon, s, p).value;
-            (f64::from(served.value[i]) - reference).abs() / reference.abs().max(1.0)
-        })
-        .fold(0.0, f64::max);
+    let (ns, nc) = (dims.n_state, dims.n_control);
+    let (mut worst, mut worst_gradient) = (0.0f64, 0.0f64);
+    for i in 0..n {
+        let s = &states[i * ns..(i + 1) * ns];
+        let p = &params[i * dims.n_params..(i + 1) * dims.n_params];
+        let reference = network.evaluate(horizon, s, p);
+        worst = worst.max((f64::from(served.value[i]) - reference.value).abs() / reference.value.abs().max(1.0));
+        let grad: Vec<f64> = served.grad[i * ns..(i + 1) * ns].iter().map(|&g| f64::from(g)).collect();
+        let scale = reference.grad_state.iter().fold(1.0f64, |m, g| m.max(g.abs()));
+        for (g, r) in grad.iter().zip(&reference.grad_state) {
+            worst_gradient = worst_gradient.max((g - r).abs() / scale);
+        }
+        // f32 state, as the graph saw it, so the state limits compare alike.
+        let s32: Vec<f64> = s.iter().map(|&x| f64::from(x as f32)).collect();
+        let control: Vec<f64> = served.control[i * nc..(i + 1) * nc].iter().map(|&u| f64::from(u)).collect();
+        ensure!(
+            control == system.optimal_control(&s32, &grad),
+            "served control {control:?} at state {s:?} is not the system's control law of the served gradient"
+        );
+    }
     ensure!(worst < RELOAD_TOLERANCE, "served value differs from the network by {worst:e} (relative) after reload");
-    tracing::info!(bundle = %dir.display(), worst_relative_error = worst, "bundle reloaded and checked");
+    ensure!(
+        worst_gradient < GRADIENT_TOLERANCE,
+        "served dV/dr differs from the network by {worst_gradient:e} (relative) after reload"
+    );
+    tracing::info!(
+        bundle = %dir.display(),
+        worst_relative_error = worst,
+        worst_gradient_error = worst_gradient,
+        "bundle reloaded and checked"
+    );
     Ok(())
 }

@@ -6,6 +6,7 @@ pub mod causal;
 pub mod config;
 pub mod dynamics;
 pub mod export;
+pub mod features;
 pub mod model;
 pub mod objective;
 pub mod report;

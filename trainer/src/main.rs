@@ -6,7 +6,7 @@ use fastrack_trainer::config::TrainConfig;
 use fastrack_trainer::export;
 use fastrack_trainer::train::{checkpoint_network, train, RunDir, Session};
 use fastrack_valuefn::manifest::Provenance;
-use fastrack_valuefn::network::ValueNetwork;
+use fastrack_valuefn::network::{NetworkShape, ValueNetwork};
 use fastrack_valuefn::system::{by_id, SYSTEM_IDS};
 use fastrack_valuefn::teb::TebOptions;
 use std::collections::BTreeMap;
@@ -130,7 +130,7 @@ fn main() -> anyhow::Result<()> {
                 "--hidden needs at least one positive width"
             );
             anyhow::ensure!(horizon.is_finite() && horizon > 0.0, "--horizon must be > 0");
-            let mut network = ValueNetwork::random(&system, &hidden, 30.0, horizon, true, seed);
+            let mut network = ValueNetwork::random(&system, &NetworkShape::new(&hidden, 30.0, true), horizon, seed);
             network.output_offset = output_offset;
             let config = serde_json::json!({
                 "system": system.id, "hidden": hidden, "omega_0": 30.0, "seed": seed, "horizon": horizon,

@@ -12,11 +12,12 @@ pub struct Siren {
     biases: Vec<Param<Tensor<1>>>,
 }
 
-/// Network outputs for a batch of normalised inputs.
+/// Network outputs for a batch of first-layer features (the normalised inputs as `crate::features` encodes
+/// them).
 pub struct Forward {
     /// Network output `y` `[N, 1]`.
     pub output: Tensor<2>,
-    /// `dy/dx` with respect to the normalised inputs `[N, n_in]`.
+    /// `dy/dx` with respect to the features `[N, n_in]`.
     pub input_grad: Tensor<2>,
 }
 
@@ -83,7 +84,7 @@ impl Siren {
         }
     }
 
-    /// `y` alone for normalised inputs `x` `[N, n_in]` (no input gradient).
+    /// `y` alone for features `x` `[N, n_in]` (no input gradient).
     pub fn output(&self, x: Tensor<2>, omega_0: f64) -> Tensor<2> {
         let last = self.weights.len() - 1;
         let h = (0..last).fold(x, |h, k| {
@@ -92,7 +93,7 @@ impl Siren {
         h.matmul(self.weights[last].val()) + self.biases[last].val().unsqueeze::<2>()
     }
 
-    /// `y` and `dy/dx` for normalised inputs `x` `[N, n_in]`: forward through `sin(omega_0 (x W + b))`
+    /// `y` and `dy/dx` for features `x` `[N, n_in]`: forward through `sin(omega_0 (x W + b))`
     /// layers, then the backward pass `g = W_L^T; g = (omega_0 cos(omega_0 z_k) * g) W_k^T` as tensor ops,
     /// so autodiff can differentiate the loss through both.
     pub fn forward(&self, x: Tensor<2>, omega_0: f64) -> Forward {

@@ -6,11 +6,12 @@
 use crate::causal::causal_weights;
 use crate::config::{LossForm, Residual, ResidualNorm, TrainConfig};
 use crate::dynamics::TensorDynamics;
+use crate::features::TensorFeatures;
 use crate::model::Siren;
 use crate::sampler::Batch;
 use crate::supervision::GridSupervision;
 use burn::tensor::{Device, Tensor, TensorData};
-use fastrack_valuefn::network::InputNormalization;
+use fastrack_valuefn::network::{FeatureLayout, InputNormalization};
 use fastrack_valuefn::system::AffineSystem;
 
 /// Loss terms of one iteration, for logs.
@@ -53,6 +54,7 @@ pub struct Objective {
     lambda: f64,
     pretrain_iterations: u64,
     omega_0: f64,
+    features: TensorFeatures,
     output_scale: f64,
     output_offset: f64,
     n_state: usize,
@@ -93,6 +95,7 @@ impl Objective {
             lambda: config.loss.lambda,
             pretrain_iterations: config.loss.pretrain_iterations,
             omega_0: config.network.omega_0,
+            features: TensorFeatures::new(FeatureLayout::for_system(system, config.network.periodic_encoding)),
             output_scale: config.network.output_scale,
             output_offset: config.network.output_offset,
             n_state: ns,
@@ -143,14 +146,12 @@ impl Objective {
 
     /// `V`, `dV/dtau`, `dV/dr` and `l` in physical units.
     pub fn value_terms(&self, model: &Siren, batch: &Batch) -> ValueTerms {
-        let forward = model.forward(batch.input.clone(), self.omega_0);
+        let forward = model.forward(self.features.encode(batch.input.clone()), self.omega_0);
         let nn = forward.output.mul_scalar(self.output_scale).add_scalar(self.output_offset);
-        let d_tau_nn = forward.input_grad.clone().narrow(1, 0, 1).mul_scalar(self.output_scale / self.tau_half_range);
-        let d_state_nn = forward
-            .input_grad
-            .narrow(1, 1, self.n_state)
-            .mul(self.state_inv_half_range.clone())
-            .mul_scalar(self.output_scale);
+        let input_grad = self.features.input_gradient(&batch.input, forward.input_grad);
+        let d_tau_nn = input_grad.clone().narrow(1, 0, 1).mul_scalar(self.output_scale / self.tau_half_range);
+        let d_state_nn =
+            input_grad.narrow(1, 1, self.n_state).mul(self.state_inv_half_range.clone()).mul_scalar(self.output_scale);
         let (error, d_error) = self.dynamics.tracking_error(&batch.state);
         match self.form {
             LossForm::Paper => ValueTerms { value: nn, d_tau: d_tau_nn, d_state: d_state_nn, error },
@@ -167,7 +168,10 @@ impl Objective {
     fn value_at(&self, model: &Siren, tau: Tensor<2>, state: Tensor<2>, params: Tensor<2>) -> Tensor<2> {
         let input = (Tensor::cat(vec![tau.clone(), state.clone(), params], 1) - self.input_center.clone())
             .mul(self.input_inv_half_range.clone());
-        let nn = model.output(input, self.omega_0).mul_scalar(self.output_scale).add_scalar(self.output_offset);
+        let nn = model
+            .output(self.features.encode(input), self.omega_0)
+            .mul_scalar(self.output_scale)
+            .add_scalar(self.output_offset);
         match self.form {
             LossForm::Paper => nn,
             LossForm::ExactBoundary => self.dynamics.tracking_error(&state).0 + tau.mul(nn),

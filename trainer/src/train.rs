@@ -12,7 +12,7 @@ use burn::grad_clipping::GradientClippingConfig;
 use burn::module::Module;
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::Device;
-use fastrack_valuefn::network::ValueNetwork;
+use fastrack_valuefn::network::{NetworkShape, ValueNetwork};
 use fastrack_valuefn::system::AffineSystem;
 use serde::{Deserialize, Serialize};
 use std::io::Write;
@@ -67,14 +67,13 @@ impl RunDir {
 /// The untrained network of a configuration (seeded SIREN initialisation).
 pub fn initial_network(config: &TrainConfig, system: &AffineSystem) -> ValueNetwork {
     let exact = config.loss.form == crate::config::LossForm::ExactBoundary;
-    let mut network = ValueNetwork::random(
-        system,
-        &config.network.hidden,
-        config.network.omega_0,
-        config.sampling.tau_max,
-        exact,
-        config.seed,
-    );
+    let shape = NetworkShape {
+        hidden: config.network.hidden.clone(),
+        omega_0: config.network.omega_0,
+        exact_boundary: exact,
+        periodic_encoding: config.network.periodic_encoding,
+    };
+    let mut network = ValueNetwork::random(system, &shape, config.sampling.tau_max, config.seed);
     network.output_scale = config.network.output_scale;
     network.output_offset = config.network.output_offset;
     network.layers[0].weight.iter_mut().for_each(|w| *w *= config.network.first_layer_scale);

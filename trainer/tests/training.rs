@@ -3,11 +3,12 @@
 
 use burn::tensor::{Device, Tensor, TensorData};
 use fastrack_trainer::config::TrainConfig;
+use fastrack_trainer::features::TensorFeatures;
 use fastrack_trainer::model::Siren;
 use fastrack_trainer::objective::Objective;
 use fastrack_trainer::sampler::Sampler;
 use fastrack_trainer::train::initial_network;
-use fastrack_valuefn::network::ValueNetwork;
+use fastrack_valuefn::network::{FeatureLayout, NetworkShape, PeriodicEncoding, ValueNetwork};
 use fastrack_valuefn::system::{double_integrator, dubins4d, AffineSystem};
 use rand::{Rng, SeedableRng};
 
@@ -23,10 +24,10 @@ fn config(path: &str) -> TrainConfig {
 fn explicit_input_gradient_equals_finite_differences_and_autodiff() {
     let device = device();
     let system = dubins4d::system();
-    let network = ValueNetwork::random(&system, &[64, 64, 64], 30.0, 2.0, false, 3);
+    let network = ValueNetwork::random(&system, &NetworkShape::new(&[64, 64, 64], 30.0, false), 2.0, 3);
     let model = Siren::from_network(&network, &device);
     let mut rng = rand::rngs::StdRng::seed_from_u64(4);
-    let (n, n_in) = (64, 7);
+    let (n, n_in) = (64, network.layers[0].n_in);
     let x: Vec<f32> = (0..n * n_in).map(|_| rng.random_range(-1.0f32..1.0)).collect();
     let input = Tensor::<2>::from_data(TensorData::new(x.clone(), [n, n_in]), &device).require_grad();
     let forward = model.forward(input.clone(), 30.0);
@@ -61,6 +62,68 @@ fn explicit_input_gradient_equals_finite_differences_and_autodiff() {
         }
     }
     assert!(worst_fd < 1e-3, "explicit vs central differences: {worst_fd:e}");
+}
+
+#[test]
+fn training_values_and_gradients_equal_the_f64_network() {
+    // The tensor path (sampler inputs, circle features, explicit gradient, chain rule, exact boundary) and
+    // the f64 network the exporter writes must be the same function: V and dV/dr at the same points.
+    let device = device();
+    for encoding in [PeriodicEncoding::Circle, PeriodicEncoding::Wrap] {
+        let mut config = config("configs/dubins4d.toml");
+        config.network.hidden = vec![32, 32];
+        config.network.periodic_encoding = encoding;
+        config.supervision = None;
+        let system = config.system().unwrap();
+        let network = initial_network(&config, &system);
+        let model = Siren::from_network(&network, &device);
+        let sampler = Sampler::new(&system, network.input.clone(), 256, 0.0, 21);
+        let batch = sampler.batch(0, config.sampling.tau_max, &device);
+        let objective = Objective::new(&config, &system, &network.input, &device);
+        let terms = objective.value_terms(&model, &batch);
+        let values = |t: Tensor<2>| t.into_data().try_to_vec::<f32>().unwrap();
+        let (tau, state, params) = (values(batch.tau), values(batch.state), values(batch.params));
+        let (value, d_state) = (values(terms.value), values(terms.d_state));
+        let (ns, np) = (system.n_state(), system.n_params());
+        let (mut worst_value, mut worst_gradient) = (0.0f64, 0.0f64);
+        for i in 0..256 {
+            let r: Vec<f64> = state[i * ns..(i + 1) * ns].iter().map(|&x| x.into()).collect();
+            let p: Vec<f64> = params[i * np..(i + 1) * np].iter().map(|&x| x.into()).collect();
+            let reference = network.evaluate(tau[i].into(), &r, &p);
+            worst_value =
+                worst_value.max((f64::from(value[i]) - reference.value).abs() / reference.value.abs().max(1.0));
+            let scale = reference.grad_state.iter().fold(1.0f64, |m, g| m.max(g.abs()));
+            for j in 0..ns {
+                worst_gradient =
+                    worst_gradient.max((f64::from(d_state[i * ns + j]) - reference.grad_state[j]).abs() / scale);
+            }
+        }
+        assert!(
+            worst_value < 1e-4 && worst_gradient < 1e-3,
+            "{encoding:?}: value {worst_value:e}, dV/dr {worst_gradient:e}"
+        );
+    }
+}
+
+#[test]
+fn circle_features_chain_rule_equals_autodiff() {
+    let device = device();
+    let system = dubins4d::system();
+    let layout = FeatureLayout::for_system(&system, PeriodicEncoding::Circle);
+    let features = TensorFeatures::new(layout.clone());
+    let network = ValueNetwork::random(&system, &NetworkShape::new(&[32, 32], 30.0, false), 2.0, 8);
+    let model = Siren::from_network(&network, &device);
+    let mut rng = rand::rngs::StdRng::seed_from_u64(9);
+    let (n, n_in) = (64, layout.n_inputs);
+    let x: Vec<f32> = (0..n * n_in).map(|_| rng.random_range(-1.0f32..1.0)).collect();
+    let input = Tensor::<2>::from_data(TensorData::new(x, [n, n_in]), &device).require_grad();
+    let forward = model.forward(features.encode(input.clone()), 30.0);
+    let chained: Vec<f32> =
+        features.input_gradient(&input, forward.input_grad.clone()).into_data().try_to_vec().unwrap();
+    let grads = forward.output.sum().backward();
+    let autodiff: Vec<f32> = input.grad(&grads).unwrap().into_data().try_to_vec().unwrap();
+    let worst = chained.iter().zip(&autodiff).map(|(a, b)| (a - b).abs() / b.abs().max(1e-2)).fold(0.0f32, f32::max);
+    assert!(worst < 1e-4, "chain rule through (cos, sin) vs autodiff: {worst:e}");
 }
 
 #[test]

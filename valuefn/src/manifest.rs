@@ -1,5 +1,6 @@
 //! `manifest.json` of a model bundle: versioned schema, serde types and validation with precise errors.
 
+use crate::network::{PeriodicEncoding, ValueNetwork};
 use crate::system::AffineSystem;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
@@ -70,6 +71,10 @@ pub struct StateDimension {
     pub periodic: bool,
     /// Part of the tracking error `l(r)`.
     pub error_coordinate: bool,
+    /// The tracker's own limits `[low, high]` on this coordinate, inside the domain: at or past a limit the
+    /// graph's control never pushes the coordinate further out. Absent: unlimited.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub limits: Option<[f64; 2]>,
 }
 
 /// A named quantity with a closed range (parameter or control).
@@ -98,6 +103,26 @@ pub struct NetworkInfo {
     pub omega_0: f64,
     /// `V = l(r) + tau * NN` (exact boundary condition) instead of `V = NN`.
     pub exact_boundary: bool,
+    /// How periodic state coordinates enter the first layer (bundles written before it was recorded: `wrap`).
+    #[serde(default = "wrapped")]
+    pub periodic_encoding: PeriodicEncoding,
+}
+
+fn wrapped() -> PeriodicEncoding {
+    PeriodicEncoding::Wrap
+}
+
+impl NetworkInfo {
+    /// The description of `network`.
+    pub fn describe(network: &ValueNetwork) -> Self {
+        Self {
+            kind: "siren".into(),
+            hidden: network.hidden_widths(),
+            omega_0: network.omega_0,
+            exact_boundary: network.exact_boundary,
+            periodic_encoding: network.periodic_encoding,
+        }
+    }
 }
 
 /// One row of the TEB table.
@@ -314,6 +339,17 @@ impl Manifest {
             if dim.periodic && dim.error_coordinate {
                 return fail(format!("state[{i}] ({})", dim.name), "an error coordinate cannot be periodic");
             }
+            if let Some([low, high]) = dim.limits {
+                if dim.periodic || !(dim.min <= low && low < high && high <= dim.max) {
+                    return fail(
+                        format!("state[{i}] ({}).limits", dim.name),
+                        format!(
+                            "must be increasing and inside the domain [{}, {}] of a non-periodic coordinate, got [{low}, {high}]",
+                            dim.min, dim.max
+                        ),
+                    );
+                }
+            }
         }
         if self.error_coords().is_empty() {
             return fail("state", "at least one coordinate must be an error coordinate");
@@ -429,6 +465,7 @@ impl Manifest {
                 max: d.max,
                 periodic: d.periodic,
                 error_coordinate: system.error_coords.contains(&i),
+                limits: d.limits.map(|(low, high)| [low, high]),
             })
             .collect();
         let q = (0..system.n_state())

@@ -4,6 +4,8 @@
 
 use crate::system::AffineSystem;
 use rand::{Rng, SeedableRng};
+use serde::{Deserialize, Serialize};
+use std::f64::consts::PI;
 
 /// A dense layer `z = W x + b`, `W` row-major `[n_out x n_in]`.
 #[derive(Debug, Clone, PartialEq)]
@@ -50,6 +52,83 @@ pub struct InputNormalization {
     pub half_range: Vec<f64>,
 }
 
+/// How periodic state coordinates enter the network.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum PeriodicEncoding {
+    /// The coordinate wrapped into its period and normalised onto `[-1, 1)`, like any other input: the two
+    /// ends of the period are far-apart inputs, so the network is continuous across the seam only as far as
+    /// training made it.
+    Wrap,
+    /// `(cos(pi x), sin(pi x))` of the normalised coordinate `x`: the network is periodic by construction.
+    #[default]
+    Circle,
+}
+
+/// Which first-layer features the normalised inputs `x = (tau, state, params)` become: the `passthrough`
+/// inputs as they are, in order, then `(cos(pi x_i), sin(pi x_i))` for each input `i` of `circles`.
+#[derive(Debug, Clone, PartialEq, Eq)]
+pub struct FeatureLayout {
+    /// Number of normalised inputs.
+    pub n_inputs: usize,
+    /// Inputs fed to the first layer unchanged.
+    pub passthrough: Vec<usize>,
+    /// Inputs fed as a `(cos, sin)` pair, after the passthrough features.
+    pub circles: Vec<usize>,
+}
+
+impl FeatureLayout {
+    /// The layout for `n_inputs` inputs of which `periodic` (input indices) are periodic.
+    pub fn new(n_inputs: usize, periodic: &[usize], encoding: PeriodicEncoding) -> Self {
+        let circles: Vec<usize> = match encoding {
+            PeriodicEncoding::Wrap => Vec::new(),
+            PeriodicEncoding::Circle => periodic.to_vec(),
+        };
+        let passthrough = (0..n_inputs).filter(|i| !circles.contains(i)).collect();
+        Self { n_inputs, passthrough, circles }
+    }
+
+    /// The layout of a network over `system`'s inputs `(tau, state, params)`.
+    pub fn for_system(system: &AffineSystem, encoding: PeriodicEncoding) -> Self {
+        let periodic: Vec<usize> = (0..system.n_state()).filter(|&j| system.state[j].periodic).map(|j| 1 + j).collect();
+        Self::new(1 + system.n_state() + system.n_params(), &periodic, encoding)
+    }
+
+    /// Number of first-layer features.
+    pub fn n_features(&self) -> usize {
+        self.passthrough.len() + 2 * self.circles.len()
+    }
+
+    /// Feature index of the `(cos, sin)` pair of the `k`-th circle input.
+    pub fn circle_features(&self, k: usize) -> (usize, usize) {
+        let first = self.passthrough.len() + 2 * k;
+        (first, first + 1)
+    }
+
+    /// The features of normalised inputs `x`.
+    pub fn encode(&self, x: &[f64]) -> Vec<f64> {
+        let mut features: Vec<f64> = self.passthrough.iter().map(|&i| x[i]).collect();
+        for &i in &self.circles {
+            features.push((PI * x[i]).cos());
+            features.push((PI * x[i]).sin());
+        }
+        features
+    }
+
+    /// `dy/dx` from `dy/dfeatures` at normalised inputs `x` (the chain rule through [`Self::encode`]).
+    pub fn input_gradient(&self, x: &[f64], feature_gradient: &[f64]) -> Vec<f64> {
+        let mut g = vec![0.0; self.n_inputs];
+        for (f, &i) in self.passthrough.iter().enumerate() {
+            g[i] = feature_gradient[f];
+        }
+        for (k, &i) in self.circles.iter().enumerate() {
+            let (c, s) = self.circle_features(k);
+            g[i] = PI * (-(PI * x[i]).sin() * feature_gradient[c] + (PI * x[i]).cos() * feature_gradient[s]);
+        }
+        g
+    }
+}
+
 /// A SIREN value network `V(tau, r; params)` in physical units.
 ///
 /// Hidden layers compute `h = sin(omega_0 (W h + b))`; the last layer is linear, `y = W h + b`. The value is
@@ -72,6 +151,28 @@ pub struct ValueNetwork {
     pub periodic: Vec<Option<(f64, f64)>>,
     /// Indices of the error coordinates.
     pub error_coords: Vec<usize>,
+    /// How the periodic coordinates enter the first layer.
+    pub periodic_encoding: PeriodicEncoding,
+}
+
+/// The architecture of a network: what [`ValueNetwork::random`] initialises.
+#[derive(Debug, Clone, PartialEq)]
+pub struct NetworkShape {
+    /// Hidden layer widths.
+    pub hidden: Vec<usize>,
+    /// Sine frequency `omega_0`.
+    pub omega_0: f64,
+    /// `V = l(r) + tau * NN` instead of `V = NN`.
+    pub exact_boundary: bool,
+    /// How periodic coordinates enter the first layer.
+    pub periodic_encoding: PeriodicEncoding,
+}
+
+impl NetworkShape {
+    /// `hidden` sine layers at `omega_0`, periodic coordinates on the circle.
+    pub fn new(hidden: &[usize], omega_0: f64, exact_boundary: bool) -> Self {
+        Self { hidden: hidden.to_vec(), omega_0, exact_boundary, periodic_encoding: PeriodicEncoding::Circle }
+    }
 }
 
 /// Value and gradient of the network at one point.
@@ -88,19 +189,13 @@ pub struct ValueAndGradient {
 impl ValueNetwork {
     /// A SIREN-initialised random network for `system` (Sitzmann et al.: first layer `U(-1/n, 1/n)`, later
     /// layers `U(-sqrt(6/n)/omega_0, sqrt(6/n)/omega_0)`), inputs normalised over the domain, `tau` over
-    /// `[0, tau_max]`.
-    pub fn random(
-        system: &AffineSystem,
-        hidden: &[usize],
-        omega_0: f64,
-        tau_max: f64,
-        exact_boundary: bool,
-        seed: u64,
-    ) -> Self {
+    /// `[0, tau_max]`, periodic coordinates encoded as `periodic_encoding` says.
+    pub fn random(system: &AffineSystem, shape: &NetworkShape, tau_max: f64, seed: u64) -> Self {
         let mut rng = rand::rngs::StdRng::seed_from_u64(seed);
-        let n_in = 1 + system.n_state() + system.n_params();
+        let NetworkShape { hidden, omega_0, exact_boundary, periodic_encoding } = shape.clone();
+        let n_in = FeatureLayout::for_system(system, periodic_encoding).n_features();
         let mut widths = vec![n_in];
-        widths.extend_from_slice(hidden);
+        widths.extend_from_slice(&hidden);
         widths.push(1);
         let layers = widths
             .windows(2)
@@ -125,7 +220,15 @@ impl ValueNetwork {
             exact_boundary,
             periodic: system.state.iter().map(|d| d.periodic.then_some((d.min, d.max - d.min))).collect(),
             error_coords: system.error_coords.clone(),
+            periodic_encoding,
         }
+    }
+
+    /// How the normalised inputs become the first layer's features.
+    pub fn feature_layout(&self) -> FeatureLayout {
+        let periodic: Vec<usize> =
+            self.periodic.iter().enumerate().filter(|(_, p)| p.is_some()).map(|(j, _)| 1 + j).collect();
+        FeatureLayout::new(self.input.center.len(), &periodic, self.periodic_encoding)
     }
 
     /// Normalisation mapping `tau in [0, tau_max]`, the state domain and the parameter ranges onto `[-1, 1]`.
@@ -162,8 +265,10 @@ impl ValueNetwork {
             None => x,
         }));
         raw.extend_from_slice(params);
-        let mut h: Vec<f64> =
+        let x: Vec<f64> =
             raw.iter().zip(&self.input.center).zip(&self.input.half_range).map(|((x, c), s)| (x - c) / s).collect();
+        let layout = self.feature_layout();
+        let mut h = layout.encode(&x);
         let hidden = &self.layers[..self.layers.len() - 1];
         let mut pre_activations = Vec::with_capacity(hidden.len());
         for layer in hidden {
@@ -179,7 +284,8 @@ impl ValueNetwork {
             let gz: Vec<f64> = g.iter().zip(z).map(|(g, z)| g * self.omega_0 * z.cos()).collect();
             g = layer.back(&gz);
         }
-        let d_raw: Vec<f64> = g.iter().zip(&self.input.half_range).map(|(g, s)| g / s).collect();
+        let d_raw: Vec<f64> =
+            layout.input_gradient(&x, &g).iter().zip(&self.input.half_range).map(|(g, s)| g / s).collect();
         let n = state.len();
         if self.exact_boundary {
             let l = self.error_coords.iter().map(|&i| state[i] * state[i]).sum::<f64>().sqrt();

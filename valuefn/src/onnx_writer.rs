@@ -4,7 +4,7 @@
 //! `control [N, n_control]` (the box minimiser of `grad . G_u u`). The horizon is fixed inside the graph;
 //! input normalisation, `omega_0`, the output scale and `tau` are folded into the weights.
 
-use crate::network::ValueNetwork;
+use crate::network::{FeatureLayout, ValueNetwork};
 use crate::system::AffineSystem;
 use prost::Message;
 
@@ -98,6 +98,130 @@ impl GraphBuilder {
     }
 }
 
+/// The first-layer terms of the circle-encoded coordinates, and what the backward pass needs of them.
+struct CircleFeatures {
+    /// `cos(phi) A_cos^T + sin(phi) A_sin^T` `[N, width]`.
+    contribution: String,
+    /// `A_cos` `[width, n_circles]` (omega_0 folded in).
+    weight_cos: String,
+    /// `A_sin` `[width, n_circles]`.
+    weight_sin: String,
+    /// `cos(phi)` `[N, n_circles]`.
+    cos: String,
+    /// `sin(phi)` `[N, n_circles]`.
+    sin: String,
+    /// `d phi / d x` per circle `[n_circles]`.
+    phase_scale: String,
+    /// `[n_circles, n_state]`, 1 where a circle's coordinate sits: puts per-circle terms back into the state.
+    scatter: String,
+}
+
+/// Emits the phases `phi = pi (x_j - c_j) / s_j` of the circle-encoded state coordinates (gathered from the
+/// wrapped state) and their first-layer contribution.
+fn write_circle_features(
+    b: &mut GraphBuilder,
+    layout: &FeatureLayout,
+    network: &ValueNetwork,
+    state_w: &str,
+    n_state: usize,
+) -> CircleFeatures {
+    let first = &network.layers[0];
+    let width1 = first.n_out;
+    let n_circles = layout.circles.len();
+    // Input index i is state coordinate i - 1.
+    let columns: Vec<i64> = layout.circles.iter().map(|&i| i as i64 - 1).collect();
+    let (c, s) = (&network.input.center, &network.input.half_range);
+    let centre: Vec<f64> = layout.circles.iter().map(|&i| c[i]).collect();
+    let scale: Vec<f64> = layout.circles.iter().map(|&i| std::f64::consts::PI / s[i]).collect();
+    let pair_weights = |pick: fn((usize, usize)) -> usize| -> Vec<f64> {
+        (0..width1)
+            .flat_map(|o| {
+                (0..n_circles)
+                    .map(move |k| network.omega_0 * first.weight[o * first.n_in + pick(layout.circle_features(k))])
+            })
+            .collect()
+    };
+    let weight_cos = b.constant("w1_cos", &[width1, n_circles], &pair_weights(|(cos, _)| cos));
+    let weight_sin = b.constant("w1_sin", &[width1, n_circles], &pair_weights(|(_, sin)| sin));
+    let columns = &columns;
+    let scatter: Vec<f64> = (0..n_circles)
+        .flat_map(|k| (0..n_state).map(move |j| if columns[k] == j as i64 { 1.0 } else { 0.0 }))
+        .collect();
+    let scatter = b.constant("circle_scatter", &[n_circles, n_state], &scatter);
+    let index = b.constant_i64("circle_columns", columns);
+    let centre = b.constant("circle_centre", &[n_circles], &centre);
+    let phase_scale = b.constant("circle_phase_scale", &[n_circles], &scale);
+    let coordinates = b.node_named("Gather", &[state_w, &index], &[("axis", 1)], None);
+    let centred = b.node("Sub", &[&coordinates, &centre]);
+    let phase = b.node("Mul", &[&centred, &phase_scale]);
+    let cos = b.node("Cos", &[&phase]);
+    let sin = b.node("Sin", &[&phase]);
+    let from_cos = b.node_named("Gemm", &[&cos, &weight_cos], &[("transB", 1)], None);
+    let from_sin = b.node_named("Gemm", &[&sin, &weight_sin], &[("transB", 1)], None);
+    let contribution = b.node("Add", &[&from_cos, &from_sin]);
+    CircleFeatures { contribution, weight_cos, weight_sin, cos, sin, phase_scale, scatter }
+}
+
+/// The lower and upper ends of the control range allowed at each state (`[n_control]` constants for a
+/// system without state limits, `[N, n_control]` otherwise), as [`AffineSystem::control_range`] defines it.
+fn write_control_range(b: &mut GraphBuilder, system: &AffineSystem, state_w: &str) -> (String, String) {
+    let (n_state, n_control) = (system.n_state(), system.n_control());
+    let lo: Vec<f64> = system.controls.iter().map(|c| c.min).collect();
+    let hi: Vec<f64> = system.controls.iter().map(|c| c.max).collect();
+    let lo_c = b.constant("u_min", &[n_control], &lo);
+    let hi_c = b.constant("u_max", &[n_control], &hi);
+    if system.state.iter().all(|d| d.limits.is_none()) {
+        return (lo_c, hi_c);
+    }
+    // Beyond f32's range where a coordinate has no limit, so the comparisons below never fire there.
+    let far = f64::from(f32::MAX);
+    let low: Vec<f64> = system.state.iter().map(|d| d.limits.map_or(-far, |l| l.0)).collect();
+    let high: Vec<f64> = system.state.iter().map(|d| d.limits.map_or(far, |l| l.1)).collect();
+    // drives[sign][i][j] = 1 where control j moves limited coordinate i in direction `sign`.
+    let drives = |sign: f64| -> Vec<f64> {
+        (0..n_state)
+            .flat_map(|i| {
+                (0..n_control).map(move |j| {
+                    let limited = system.state[i].limits.is_some();
+                    if limited && sign * system.g_control[(i, j)] > 0.0 {
+                        1.0
+                    } else {
+                        0.0
+                    }
+                })
+            })
+            .collect()
+    };
+    let up = b.constant("drives_up", &[n_state, n_control], &drives(1.0));
+    let down = b.constant("drives_down", &[n_state, n_control], &drives(-1.0));
+    let low_c = b.constant("limit_low", &[n_state], &low);
+    let high_c = b.constant("limit_high", &[n_state], &high);
+    let at_high = b.node("GreaterOrEqual", &[state_w, &high_c]);
+    let at_high = b.node_named("Cast", &[&at_high], &[("to", i64::from(FLOAT))], None);
+    let at_low = b.node("LessOrEqual", &[state_w, &low_c]);
+    let at_low = b.node_named("Cast", &[&at_low], &[("to", i64::from(FLOAT))], None);
+    // A control is capped at zero from above if it would push a coordinate up past its high limit or down
+    // past its low one, and from below in the mirror cases.
+    let capped_above = {
+        let a = b.node("MatMul", &[&at_high, &up]);
+        let c = b.node("MatMul", &[&at_low, &down]);
+        b.node("Add", &[&a, &c])
+    };
+    let capped_below = {
+        let a = b.node("MatMul", &[&at_high, &down]);
+        let c = b.node("MatMul", &[&at_low, &up]);
+        b.node("Add", &[&a, &c])
+    };
+    let zero = b.constant("zero_u", &[1], &[0.0]);
+    let hi_cut = b.constant("u_max_cut", &[n_control], &hi.iter().map(|h| h.min(0.0)).collect::<Vec<_>>());
+    let lo_cut = b.constant("u_min_cut", &[n_control], &lo.iter().map(|l| l.max(0.0)).collect::<Vec<_>>());
+    let cap_above = b.node("Greater", &[&capped_above, &zero]);
+    let cap_below = b.node("Greater", &[&capped_below, &zero]);
+    let hi_row = b.node("Where", &[&cap_above, &hi_cut, &hi_c]);
+    let lo_row = b.node("Where", &[&cap_below, &lo_cut, &lo_c]);
+    (lo_row, hi_row)
+}
+
 fn tensor_info(name: &str, dims: &[Option<usize>]) -> onnx::ValueInfoProto {
     let dim = dims
         .iter()
@@ -144,12 +268,16 @@ pub fn write_value_graph(network: &ValueNetwork, system: &AffineSystem, tau: f64
     let offset = b.node("Mul", &[&cycles, &pm_c]);
     let state_w = b.node("Sub", &["state", &offset]);
 
-    // First layer with normalisation, omega_0 and the fixed tau folded in.
+    // First layer with normalisation, omega_0 and the fixed tau folded in. Passthrough inputs enter through
+    // `a_state` / `a_params`; each circle-encoded coordinate through the cos and sin of its phase.
     let w0 = network.omega_0;
     let first = &network.layers[0];
+    let layout = network.feature_layout();
     let (c, s) = (&network.input.center, &network.input.half_range);
     let width1 = first.n_out;
-    let col = |o: usize, i: usize| first.weight[o * first.n_in + i];
+    let feature_of: Vec<Option<usize>> =
+        (0..layout.n_inputs).map(|i| layout.passthrough.iter().position(|&p| p == i)).collect();
+    let col = |o: usize, i: usize| feature_of[i].map_or(0.0, |f| first.weight[o * first.n_in + f]);
     let a_state: Vec<f64> =
         (0..width1).flat_map(|o| (0..n_state).map(move |j| w0 * col(o, 1 + j) / s[1 + j])).collect();
     let a_params: Vec<f64> = (0..width1)
@@ -157,7 +285,7 @@ pub fn write_value_graph(network: &ValueNetwork, system: &AffineSystem, tau: f64
         .collect();
     let b_first: Vec<f64> = (0..width1)
         .map(|o| {
-            let centred: f64 = (1..first.n_in).map(|i| col(o, i) * c[i] / s[i]).sum();
+            let centred: f64 = (1..layout.n_inputs).map(|i| col(o, i) * c[i] / s[i]).sum();
             w0 * (first.bias[o] + col(o, 0) * (tau - c[0]) / s[0] - centred)
         })
         .collect();
@@ -167,6 +295,13 @@ pub fn write_value_graph(network: &ValueNetwork, system: &AffineSystem, tau: f64
     let from_params = b.node_named("Gemm", &["params", &a_params_c, &b_first_c], &[("transB", 1)], None);
     let from_state = b.node_named("Gemm", &[&state_w, &a_state_c], &[("transB", 1)], None);
     let mut z = b.node("Add", &[&from_state, &from_params]);
+    let circles = if layout.circles.is_empty() {
+        None
+    } else {
+        let circle = write_circle_features(&mut b, &layout, network, &state_w, n_state);
+        z = b.node("Add", &[&z, &circle.contribution]);
+        Some(circle)
+    };
     let mut pre_activations = vec![z.clone()];
     let mut h = b.node("Sin", &[&z]);
 
@@ -202,6 +337,17 @@ pub fn write_value_graph(network: &ValueNetwork, system: &AffineSystem, tau: f64
         g = b.node("Mul", &[&cos, &back]);
     }
     let mut grad = b.node("MatMul", &[&g, &a_state_c]);
+    if let Some(circle) = &circles {
+        // dz1/dx_j through the phase phi = k (x_j - c): k (a_sin cos(phi) - a_cos sin(phi)).
+        let via_cos = b.node("MatMul", &[&g, &circle.weight_cos]);
+        let via_sin = b.node("MatMul", &[&g, &circle.weight_sin]);
+        let along_sin = b.node("Mul", &[&via_sin, &circle.cos]);
+        let along_cos = b.node("Mul", &[&via_cos, &circle.sin]);
+        let d_phase = b.node("Sub", &[&along_sin, &along_cos]);
+        let d_coordinate = b.node("Mul", &[&d_phase, &circle.phase_scale]);
+        let scattered = b.node("MatMul", &[&d_coordinate, &circle.scatter]);
+        grad = b.node("Add", &[&grad, &scattered]);
+    }
 
     if network.exact_boundary {
         // V += l(r) = |E^T r|, dV/dr += E (E^T r) / max(l, eps).
@@ -229,13 +375,14 @@ pub fn write_value_graph(network: &ValueNetwork, system: &AffineSystem, tau: f64
     b.node_named("Squeeze", &[&value_2d, &axes], &[], Some("value"));
     b.node_named("Identity", &[&grad], &[], Some("grad"));
 
-    // Control law: u_j = lo_j if c_j > 0, hi_j if c_j < 0, midpoint if c_j = 0, with c = grad G_u.
+    // Control law: u_j = lo_j if c_j > 0, hi_j if c_j < 0, midpoint if c_j = 0, with c = grad G_u, over the
+    // range allowed at the state (the box, cut at zero at the state's limits: AffineSystem::control_range).
     let g_u: Vec<f64> = (0..n_state).flat_map(|i| (0..n_control).map(move |j| system.g_control[(i, j)])).collect();
     let g_u_c = b.constant("g_control", &[n_state, n_control], &g_u);
-    let u_lo = b.constant("u_min", &[n_control], &system.controls.iter().map(|c| c.min).collect::<Vec<_>>());
-    let u_hi = b.constant("u_max", &[n_control], &system.controls.iter().map(|c| c.max).collect::<Vec<_>>());
-    let u_mid =
-        b.constant("u_mid", &[n_control], &system.controls.iter().map(|c| 0.5 * (c.min + c.max)).collect::<Vec<_>>());
+    let (u_lo, u_hi) = write_control_range(&mut b, system, &state_w);
+    let sum = b.node("Add", &[&u_lo, &u_hi]);
+    let half = b.constant("half", &[1], &[0.5]);
+    let u_mid = b.node("Mul", &[&sum, &half]);
     let zero = b.constant("zero", &[1], &[0.0]);
     let coeff = b.node("MatMul", &["grad", &g_u_c]);
     let positive = b.node("Greater", &[&coeff, &zero]);

@@ -2,6 +2,7 @@
 
 use fastrack_valuefn::bundle::{Bundle, BundleError};
 use fastrack_valuefn::manifest::{Manifest, NetworkInfo, Provenance, SystemInfo, TebRow, SCHEMA_VERSION};
+use fastrack_valuefn::network::PeriodicEncoding;
 use fastrack_valuefn::system::dubins4d;
 
 fn manifest() -> Manifest {
@@ -17,7 +18,13 @@ fn manifest() -> Manifest {
         params,
         controls,
         horizon: 1.0,
-        network: NetworkInfo { kind: "siren".into(), hidden: vec![8], omega_0: 30.0, exact_boundary: true },
+        network: NetworkInfo {
+            kind: "siren".into(),
+            hidden: vec![8],
+            omega_0: 30.0,
+            exact_boundary: true,
+            periodic_encoding: PeriodicEncoding::Circle,
+        },
         teb_table: (0..16)
             .map(|k| TebRow {
                 beta: 0.5 + 0.05 * k as f64,

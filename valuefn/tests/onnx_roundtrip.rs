@@ -1,7 +1,7 @@
 //! A graph written by the ONNX writer, run by ONNX Runtime through the evaluator, against an independent
 //! f64 evaluation of the same network, finite differences, and the system's control law.
 
-use fastrack_valuefn::network::ValueNetwork;
+use fastrack_valuefn::network::{NetworkShape, PeriodicEncoding, ValueNetwork};
 use fastrack_valuefn::onnx_writer::write_value_graph;
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
 use fastrack_valuefn::system::{double_integrator, dubins4d, AffineSystem};
@@ -25,9 +25,13 @@ fn random_batch(system: &AffineSystem, n: usize, seed: u64) -> (Vec<f32>, Vec<f3
 }
 
 fn check_roundtrip(system: &AffineSystem, exact_boundary: bool, seed: u64) {
+    let network = ValueNetwork::random(system, &NetworkShape::new(&[256, 256, 256], 30.0, exact_boundary), 2.0, seed);
+    check_network_roundtrip(system, &network, exact_boundary, seed);
+}
+
+fn check_network_roundtrip(system: &AffineSystem, network: &ValueNetwork, exact_boundary: bool, seed: u64) {
     let tau = 1.7;
-    let network = ValueNetwork::random(system, &[256, 256, 256], 30.0, 2.0, exact_boundary, seed);
-    let onnx = write_value_graph(&network, system, tau);
+    let onnx = write_value_graph(network, system, tau);
     let dims = GraphDims { n_state: system.n_state(), n_params: system.n_params(), n_control: system.n_control() };
     let evaluator =
         Evaluator::new(runtime(None).expect("ONNX Runtime (scripts/setup-onnxruntime.sh)"), &onnx, dims, 1).unwrap();
@@ -71,13 +75,19 @@ fn check_roundtrip(system: &AffineSystem, exact_boundary: bool, seed: u64) {
     }
     assert!(worst_grad < 1e-3, "grad vs central differences: worst relative error {worst_grad:e}");
 
-    // control = the system's control law applied to the graph's grad.
+    // control = the system's control law at the item's state applied to the graph's grad.
+    let mut at_limits = 0;
     for i in 0..N {
+        let s: Vec<f64> = states[i * ns..(i + 1) * ns].iter().map(|&x| x.into()).collect();
         let g: Vec<f64> = out.grad[i * ns..(i + 1) * ns].iter().map(|&x| x.into()).collect();
-        let expected = system.optimal_control(&g);
+        let expected = system.optimal_control(&s, &g);
         let got: Vec<f64> = out.control[i * nc..(i + 1) * nc].iter().map(|&x| x.into()).collect();
         assert_eq!(got, expected, "control of item {i}");
+        at_limits += usize::from(system.control_range(&s) != system.control_box());
     }
+    // Uniform states reach dubins4d's speed limits (0.1 of the 3 m/s speed domain at each end).
+    let limited = system.state.iter().any(|d| d.limits.is_some());
+    assert!(!limited || at_limits > N / 40, "{at_limits} of {N} items at a limit");
     eprintln!("{} exact_bc={exact_boundary}: value err {worst_value:.2e}, grad err {worst_grad:.2e}", system.id);
 }
 
@@ -97,10 +107,37 @@ fn double_integrator_graph_matches_reference() {
 }
 
 #[test]
+fn dubins4d_wrapped_heading_graph_matches_reference() {
+    let system = dubins4d::system();
+    let network = ValueNetwork::random(
+        &system,
+        &NetworkShape { periodic_encoding: PeriodicEncoding::Wrap, ..NetworkShape::new(&[64, 64], 30.0, true) },
+        2.0,
+        4,
+    );
+    assert_eq!(network.layers[0].n_in, 1 + 4 + 2, "tau, the four coordinates and two parameters");
+    check_network_roundtrip(&system, &network, true, 4);
+}
+
+#[test]
+fn circle_encoded_network_is_periodic_and_has_two_heading_features() {
+    let system = dubins4d::system();
+    let network = ValueNetwork::random(&system, &NetworkShape::new(&[32, 32], 30.0, true), 2.0, 6);
+    assert_eq!(network.layers[0].n_in, 1 + 3 + 2 + 2, "tau, x, y, v, two parameters, cos and sin of theta");
+    // Across the seam at -pi / pi the f64 network is continuous in value and gradient.
+    let just_below = network.evaluate(1.0, &[0.3, -0.2, std::f64::consts::PI - 1e-7, 1.0], &[0.9, 0.9]);
+    let just_above = network.evaluate(1.0, &[0.3, -0.2, -std::f64::consts::PI + 1e-7, 1.0], &[0.9, 0.9]);
+    assert!((just_below.value - just_above.value).abs() < 1e-5);
+    for (a, b) in just_below.grad_state.iter().zip(&just_above.grad_state) {
+        assert!((a - b).abs() < 1e-4, "{:?} vs {:?}", just_below.grad_state, just_above.grad_state);
+    }
+}
+
+#[test]
 fn exact_boundary_graph_wraps_periodic_state() {
     // theta and theta + 2 pi give the same value and gradient.
     let system = dubins4d::system();
-    let network = ValueNetwork::random(&system, &[32, 32], 30.0, 2.0, true, 5);
+    let network = ValueNetwork::random(&system, &NetworkShape::new(&[32, 32], 30.0, true), 2.0, 5);
     let onnx = write_value_graph(&network, &system, 1.0);
     let dims = GraphDims { n_state: 4, n_params: 2, n_control: 2 };
     let evaluator = Evaluator::new(runtime(None).unwrap(), &onnx, dims, 1).unwrap();

@@ -212,7 +212,8 @@ fn model_json(m: &pb::ModelInfo) -> Value {
         "untrained": m.untrained, "default_version": m.is_default_version, "horizon": m.horizon,
         "state": m.state.iter().map(|d| json!({"name": d.name, "unit": d.unit,
             "min": d.bounds.map(|b| b.min), "max": d.bounds.map(|b| b.max), "periodic": d.periodic,
-            "error_coordinate": d.error_coordinate})).collect::<Vec<_>>(),
+            "error_coordinate": d.error_coordinate,
+            "limits": d.limits.map(|l| [l.min, l.max])})).collect::<Vec<_>>(),
         "params": m.params.iter().map(|p| json!({"name": p.name, "unit": p.unit,
             "min": p.range.map(|r| r.min), "max": p.range.map(|r| r.max)})).collect::<Vec<_>>(),
         "controls": m.controls.iter().map(|c| json!({"name": c.name, "unit": c.unit,
@@ -237,12 +238,13 @@ fn model_text(m: &pb::ModelInfo) -> String {
     for d in &m.state {
         let b = d.bounds.unwrap_or_default();
         out += &format!(
-            "\n    {:<8} [{}, {}] {}{}",
+            "\n    {:<8} [{}, {}] {}{}{}",
             d.name,
             b.min,
             b.max,
             d.unit,
-            if d.periodic { " periodic" } else { "" }
+            if d.periodic { " periodic" } else { "" },
+            d.limits.map_or(String::new(), |l| format!(", control held within [{}, {}]", l.min, l.max))
         );
     }
     out += "\n  params:";

@@ -29,8 +29,8 @@ pub fn system() -> AffineSystem {
         id: ID,
         description: "1-D double integrator (x_r, v), |u| <= 1, tracking a point planner with |u_p| <= beta",
         state: vec![
-            StateDim { name: "x_r", unit: "m", min: -2.0, max: 2.0, periodic: false },
-            StateDim { name: "v", unit: "m/s", min: -1.5, max: 1.5, periodic: false },
+            StateDim { name: "x_r", unit: "m", min: -2.0, max: 2.0, periodic: false, limits: None },
+            StateDim { name: "v", unit: "m/s", min: -1.5, max: 1.5, periodic: false, limits: None },
         ],
         error_coords: vec![0],
         params: vec![ParamDim { name: "beta", unit: "m/s", min: 0.5, max: 1.0 }],

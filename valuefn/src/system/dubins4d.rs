@@ -18,14 +18,22 @@ pub const POSITION_HALF_WIDTH: f64 = 3.0;
 pub const V_MIN: f64 = 0.0;
 /// Upper end of the speed domain (m/s): above the planner's top diagonal speed `sqrt(2) * 1.25`.
 pub const V_MAX: f64 = 3.0;
+/// The tracker's speed limits (m/s), 0.1 m/s inside the domain: the served control never accelerates past
+/// `V_LIMITS.1` nor brakes below `V_LIMITS.0`, so a tracker applying it for up to 0.1 s per control step stays
+/// inside the trained domain (without them, rollouts left it where the value is flat in `v`: README).
+pub const V_LIMITS: (f64, f64) = (0.1, 2.9);
+
+fn position(name: &'static str) -> StateDim {
+    StateDim { name, unit: "m", min: -POSITION_HALF_WIDTH, max: POSITION_HALF_WIDTH, periodic: false, limits: None }
+}
 
 /// The dubins4d relative system.
 pub fn system() -> AffineSystem {
     let state = vec![
-        StateDim { name: "x_r", unit: "m", min: -POSITION_HALF_WIDTH, max: POSITION_HALF_WIDTH, periodic: false },
-        StateDim { name: "y_r", unit: "m", min: -POSITION_HALF_WIDTH, max: POSITION_HALF_WIDTH, periodic: false },
-        StateDim { name: "theta", unit: "rad", min: -PI, max: PI, periodic: true },
-        StateDim { name: "v", unit: "m/s", min: V_MIN, max: V_MAX, periodic: false },
+        position("x_r"),
+        position("y_r"),
+        StateDim { name: "theta", unit: "rad", min: -PI, max: PI, periodic: true, limits: None },
+        StateDim { name: "v", unit: "m/s", min: V_MIN, max: V_MAX, periodic: false, limits: Some(V_LIMITS) },
     ];
     let drift = Drift {
         n_state: 4,

@@ -29,6 +29,10 @@ pub struct StateDim {
     pub max: f64,
     /// Angle-like coordinate, wrapped into `[min, max)`.
     pub periodic: bool,
+    /// The tracker's own limits `(low, high)` on this coordinate (e.g. its speed range), inside the domain:
+    /// at or past a limit the served control never pushes the coordinate further out (see
+    /// [`AffineSystem::control_range`]). `None`: unlimited.
+    pub limits: Option<(f64, f64)>,
 }
 
 /// One named input with box bounds (tracker control or disturbance).
@@ -195,9 +199,73 @@ impl AffineSystem {
             + self.disturbance_box().max_dot(&Self::project(&self.g_disturbance, p))
     }
 
-    /// Optimal tracker control: minimises `p . G_u u` over the control box.
-    pub fn optimal_control(&self, p: &[f64]) -> Vec<f64> {
-        self.control_box().argmin_dot(&Self::project(&self.g_control, p))
+    /// Optimal tracker control at `r` for the value gradient `p`: minimises `p . G_u u` over the control
+    /// range allowed at `r` ([`AffineSystem::control_range`]; the whole box away from the state limits).
+    pub fn optimal_control(&self, r: &[f64], p: &[f64]) -> Vec<f64> {
+        self.control_range(r).argmin_dot(&Self::project(&self.g_control, p))
+    }
+
+    /// The tracker controls allowed at `r`: the control box, cut at zero for each control that drives a
+    /// coordinate at or past one of its [`StateDim::limits`] further out (`G_u[i][j] u_j` must not be > 0
+    /// at `r_i >= high`, nor < 0 at `r_i <= low`). [`AffineSystem::check_limits`] makes sure that this
+    /// holds the coordinate: nothing else moves it, and zero lies in every such control's range.
+    pub fn control_range(&self, r: &[f64]) -> BoxSet {
+        let (mut lo, mut hi): (Vec<f64>, Vec<f64>) = self.controls.iter().map(|c| (c.min, c.max)).unzip();
+        for (i, dim) in self.state.iter().enumerate() {
+            let Some((low, high)) = dim.limits else { continue };
+            // +1: the coordinate must not grow; -1: it must not shrink.
+            let forbidden = if r[i] >= high {
+                1.0
+            } else if r[i] <= low {
+                -1.0
+            } else {
+                continue;
+            };
+            for j in 0..self.n_control() {
+                let g = forbidden * self.g_control[(i, j)];
+                if g > 0.0 {
+                    hi[j] = hi[j].min(0.0);
+                } else if g < 0.0 {
+                    lo[j] = lo[j].max(0.0);
+                }
+            }
+        }
+        BoxSet::new(lo, hi)
+    }
+
+    /// Checks that every limited coordinate is held by [`AffineSystem::control_range`]: not periodic, limits
+    /// inside the domain, no drift, planner or disturbance acting on it, at least one control driving it, and
+    /// zero inside the range of each control driving it.
+    pub fn check_limits(&self) -> Result<(), String> {
+        for (i, dim) in self.state.iter().enumerate() {
+            let Some((low, high)) = dim.limits else { continue };
+            let name = dim.name;
+            if dim.periodic || !(dim.min <= low && low < high && high <= dim.max) {
+                return Err(format!(
+                    "{name}: limits [{low}, {high}] must be increasing and inside the domain [{}, {}] of a non-periodic coordinate",
+                    dim.min, dim.max
+                ));
+            }
+            let moved_by = |m: &DMatrix<f64>| (0..m.ncols()).any(|j| m[(i, j)] != 0.0);
+            if self.drift.terms.iter().any(|t| t.output == i)
+                || moved_by(&self.g_planner)
+                || moved_by(&self.g_disturbance)
+            {
+                return Err(format!("{name}: a limited coordinate may be moved by the tracker's controls only"));
+            }
+            let driving: Vec<&InputDim> =
+                (0..self.n_control()).filter(|&j| self.g_control[(i, j)] != 0.0).map(|j| &self.controls[j]).collect();
+            if driving.is_empty() {
+                return Err(format!("{name}: no control drives this limited coordinate"));
+            }
+            if let Some(c) = driving.iter().find(|c| !(c.min <= 0.0 && 0.0 <= c.max)) {
+                return Err(format!(
+                    "{name}: control {} drives it but its range [{}, {}] excludes 0",
+                    c.name, c.min, c.max
+                ));
+            }
+        }
+        Ok(())
     }
 
     /// Worst-case planner input: maximises `p . G_p u_p` over the planner box.
