@@ -20,8 +20,15 @@ impl Table {
         Self { header: header.iter().map(|s| s.to_string()).collect(), rows: Vec::new() }
     }
 
-    /// Appends a row.
+    /// Appends a row; it must have one cell per column.
     pub fn row(&mut self, cells: Vec<String>) {
+        assert_eq!(
+            cells.len(),
+            self.header.len(),
+            "a row of {} cells in a table of {} columns",
+            cells.len(),
+            self.header.len()
+        );
         self.rows.push(cells);
     }
 

@@ -101,6 +101,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut table = Table::new(&[
         "beta",
         "learned level",
+        "sampled level",
         "verified level",
         "served level",
         "violations / N",
