@@ -1,18 +1,28 @@
 """PyTorch CPU reference of one DeepReach training iteration (the same work as fastrack-trainer's):
 SIREN forward, dV/dinput with torch.autograd.grad(create_graph=True) as DeepReach does, the HJI-VI
-residual loss of the Dubins car, backward, Adam. Prints iterations/s as JSON.
-Usage: python3 torch_step.py WIDTH DEPTH POINTS ITERATIONS"""
+residual loss of the Dubins car, backward, Adam. Prints iterations/s as JSON. ENCODING (default circle) is
+how the heading enters the first layer, as in the trainer: `circle` (cos and sin of its phase) or `wrap`.
+Usage: python3 torch_step.py WIDTH DEPTH POINTS ITERATIONS [ENCODING]"""
 import json, sys, time
 import torch
 
 width, depth, points, iterations = (int(a) for a in sys.argv[1:5])
+circle = (sys.argv[5] if len(sys.argv) > 5 else "circle") == "circle"
 torch.manual_seed(0)
 n_in = 6  # tau, x_r, y_r, theta, v, beta (diagonal mode)
-layers = [torch.nn.Linear(n_in if i == 0 else width, width) for i in range(depth)] + [torch.nn.Linear(width, 1)]
+n_features = n_in + 1 if circle else n_in
+layers = [torch.nn.Linear(n_features if i == 0 else width, width) for i in range(depth)] + [torch.nn.Linear(width, 1)]
 params = [p for l in layers for p in l.parameters()]
 opt = torch.optim.Adam(params, lr=1e-4)
 
+def features(x):
+    if not circle:
+        return x
+    phase = torch.pi * x[:, 3:4]
+    return torch.cat([x[:, :3], x[:, 4:], torch.cos(phase), torch.sin(phase)], 1)
+
 def net(x):
+    x = features(x)
     for l in layers[:-1]:
         x = torch.sin(30.0 * l(x))
     return layers[-1](x)

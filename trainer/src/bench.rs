@@ -9,6 +9,7 @@ use crate::train::initial_network;
 use anyhow::Context;
 use burn::optim::{AdamConfig, GradientsParams};
 use burn::tensor::{Device, Distribution, Tensor};
+use fastrack_valuefn::network::PeriodicEncoding;
 use std::time::Instant;
 
 /// One benchmark case.
@@ -26,6 +27,7 @@ pub struct Case {
 
 /// Floating-point operations of one iteration: forward matmuls `F` (multiply-adds), the explicit input
 /// gradient (about `F` again), and autodiff's backward of both (two matmuls per matmul): `6 F` MACs.
+/// `n_in` is the number of first-layer features.
 pub fn flops_per_iteration(case: &Case, n_in: usize) -> f64 {
     let macs_forward =
         case.points as f64 * (n_in * case.width + (case.depth - 1) * case.width * case.width + case.width) as f64;
@@ -70,13 +72,19 @@ pub fn matmul_gflops(n: usize, repeats: usize, device: &Device) -> f64 {
     2.0 * (n as f64).powi(3) * repeats as f64 / start.elapsed().as_secs_f64() / 1e9
 }
 
-/// PyTorch's iterations/s for `case` through `bench/torch_step.py`, or why it could not run.
-pub fn torch_iterations_per_second(case: &Case) -> Result<(f64, String), String> {
+/// PyTorch's iterations/s for `case` through `bench/torch_step.py` (the heading encoded as `encoding`), or
+/// why it could not run.
+pub fn torch_iterations_per_second(case: &Case, encoding: PeriodicEncoding) -> Result<(f64, String), String> {
     let script = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("bench/torch_step.py");
+    let encoding = match encoding {
+        PeriodicEncoding::Circle => "circle",
+        PeriodicEncoding::Wrap => "wrap",
+    };
     let output = std::process::Command::new("python3")
         .arg(&script)
         .args([case.width, case.depth, case.points].map(|x| x.to_string()))
         .arg(case.iterations.to_string())
+        .arg(encoding)
         .output()
         .map_err(|e| format!("python3: {e}"))?;
     if !output.status.success() {

@@ -6,7 +6,7 @@ use fastrack_trainer::config::TrainConfig;
 use fastrack_trainer::export;
 use fastrack_trainer::train::{checkpoint_network, train, RunDir, Session};
 use fastrack_valuefn::manifest::Provenance;
-use fastrack_valuefn::network::{NetworkShape, ValueNetwork};
+use fastrack_valuefn::network::{FeatureLayout, NetworkShape, ValueNetwork};
 use fastrack_valuefn::system::{by_id, SYSTEM_IDS};
 use fastrack_valuefn::teb::TebOptions;
 use std::collections::BTreeMap;
@@ -247,7 +247,8 @@ fn run_bench(config: &TrainConfig, out: &std::path::Path) -> anyhow::Result<()> 
     };
     use fastrack_valuefn::record::{write_record, Table};
     let device = burn::tensor::Device::flex().autodiff();
-    let n_in = 1 + config.system()?.n_state() + config.system()?.n_params();
+    let encoding = config.network.periodic_encoding;
+    let n_in = FeatureLayout::for_system(&config.system()?, encoding).n_features();
     let peak = matmul_gflops(2048, 5, &burn::tensor::Device::flex());
     eprintln!("f32 matmul 2048^3 (burn flex): {peak:.1} GFLOP/s");
     let shipped = Case {
@@ -270,7 +271,7 @@ fn run_bench(config: &TrainConfig, out: &std::path::Path) -> anyhow::Result<()> 
     for (label, case) in [("shipped", shipped), ("paper", paper)] {
         let rate = iterations_per_second(config, &case, &device)?;
         let gflop = flops_per_iteration(&case, n_in) / 1e9;
-        let torch = torch_iterations_per_second(&case);
+        let torch = torch_iterations_per_second(&case, encoding);
         let (torch_cell, ratio_cell) = match &torch {
             Ok((t, _)) => (format!("{t:.3}"), format!("{:.2}", rate / t)),
             Err(why) => (format!("n/a ({why})"), "-".into()),
