@@ -30,6 +30,16 @@ pub struct LossTerms {
     pub supervision_gradient: f64,
 }
 
+/// Mean of `error^2`, times `under_weight` where `error < 0` (the weights are constants of the gradient).
+fn weighted_square_error(error: Tensor<2>, under_weight: f64) -> Tensor<1> {
+    let squared = error.clone().powi_scalar(2);
+    if under_weight == 1.0 {
+        return squared.mean();
+    }
+    let under = error.detach().lower_elem(0.0).float();
+    squared.mul(under.mul_scalar(under_weight - 1.0).add_scalar(1.0)).mean()
+}
+
 /// `V`, its derivatives and `l` on a batch.
 pub struct ValueTerms {
     /// `V` `[N, 1]`.
@@ -132,7 +142,7 @@ impl Objective {
         let batch = supervision.batch(iteration, device);
         if supervision.gradient_weight <= 0.0 {
             let value = self.value_at(model, batch.tau, batch.state, batch.params);
-            return ((value - batch.target).powi_scalar(2).mean(), None);
+            return (weighted_square_error(value - batch.target, supervision.under_weight), None);
         }
         let input = (Tensor::cat(vec![batch.tau.clone(), batch.state.clone(), batch.params.clone()], 1)
             - self.input_center.clone())
@@ -141,7 +151,7 @@ impl Objective {
             Batch { tau: batch.tau, state: batch.state, params: batch.params, input, n_boundary: 0, tau_limit: 0.0 };
         let v = self.value_terms(model, &points);
         let gradient_error = (v.d_state - batch.target_gradient).powi_scalar(2).sum_dim(1).mean();
-        ((v.value - batch.target).powi_scalar(2).mean(), Some(gradient_error))
+        (weighted_square_error(v.value - batch.target, supervision.under_weight), Some(gradient_error))
     }
 
     /// `V`, `dV/dtau`, `dV/dr` and `l` in physical units.
@@ -307,5 +317,26 @@ impl Objective {
             supervision_gradient: supervision_gradient.map_or(0.0, scalar),
         };
         (total, terms)
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::weighted_square_error;
+    use burn::tensor::{Device, Tensor, TensorData};
+
+    #[test]
+    fn errors_below_the_target_weigh_more() {
+        let device = Device::flex().autodiff();
+        let error =
+            Tensor::<2>::from_data(TensorData::new(vec![-1.0f32, 2.0, -0.5, 0.0], [4, 1]), &device).require_grad();
+        let loss = weighted_square_error(error.clone(), 4.0);
+        // (4 * 1 + 4 + 4 * 0.25 + 0) / 4 = 2.25
+        assert!((loss.clone().into_scalar::<f32>() - 2.25).abs() < 1e-6);
+        let gradient: Vec<f32> = error.grad(&loss.backward()).unwrap().into_data().try_to_vec().unwrap();
+        // d/de of w e^2 / 4 = w e / 2: the weight is a constant of the gradient.
+        assert_eq!(gradient, vec![-2.0, 1.0, -1.0, 0.0]);
+        let symmetric = weighted_square_error(error.detach(), 1.0).into_scalar::<f32>();
+        assert!((symmetric - 1.3125).abs() < 1e-6);
     }
 }

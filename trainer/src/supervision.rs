@@ -67,6 +67,8 @@ pub struct GridSupervision {
     pub weight: f64,
     /// Weight of the `dV/dr` error (0: values only).
     pub gradient_weight: f64,
+    /// Multiplies the squared value error where the network is below the target.
+    pub under_weight: f64,
 }
 
 impl GridSupervision {
@@ -142,6 +144,7 @@ impl GridSupervision {
             seed,
             weight: config.weight,
             gradient_weight: config.gradient_weight,
+            under_weight: config.under_weight,
         })
     }
 
