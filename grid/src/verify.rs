@@ -16,6 +16,7 @@
 use fastrack_valuefn::manifest::{Manifest, TebRow, Verification};
 use fastrack_valuefn::runtime::{Evaluator, RuntimeError};
 use fastrack_valuefn::system::AffineSystem;
+use fastrack_valuefn::teb::{reshape_at_served_levels, TebOptions};
 use indicatif::ProgressBar;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -74,6 +75,9 @@ pub enum VerifyError {
     /// A setting is out of range.
     #[error("{0}")]
     Setting(String),
+    /// The error sets at the served levels could not be measured.
+    #[error("measuring the error set at the served level: {0}")]
+    Shape(String),
     /// The bundle's system is not the one given.
     #[error("the bundle is for system `{bundle}`, not `{system}`")]
     System {
@@ -325,8 +329,8 @@ pub fn verify_row(
 }
 
 /// Verifies the rows of `manifest` whose `beta` is in `betas` (all rows when `None`), writing each
-/// result into its row's `verification` (raised where needed to keep served levels monotone in `beta`);
-/// returns the reports (raw maxima) in row order.
+/// result into its row's `verification` (raised where needed to keep served levels monotone in `beta`) and
+/// every row's extent and boundary radii at its served level; returns the reports (raw maxima) in row order.
 pub fn verify_table(
     evaluator: &Evaluator,
     manifest: &mut Manifest,
@@ -357,6 +361,8 @@ pub fn verify_table(
         progress.inc(1);
     }
     monotone_envelope(manifest)?;
+    reshape_at_served_levels(evaluator, system, &mut manifest.teb_table, &TebOptions::default())
+        .map_err(VerifyError::Shape)?;
     Ok(reports)
 }
 

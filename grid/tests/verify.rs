@@ -150,6 +150,12 @@ fn write_bundle(
 
 /// Verifies the `beta_u` row of a bundle of the fitted network scaled by `scale`, level `level`.
 fn verify(scale: f64, level: f64) -> fastrack_grid::verify::RowReport {
+    verify_and_check_shapes(scale, level, false)
+}
+
+/// [`verify`], optionally checking every row's extent against a dense scan (meaningful for a network that
+/// keeps `V >= |x|`, which the error-set measurement relies on; a shrunk one does not).
+fn verify_and_check_shapes(scale: f64, level: f64, check_shapes: bool) -> fastrack_grid::verify::RowReport {
     let (system, solution) = ground_truth();
     let network = fitted_network(system, solution, scale);
     let root = tempfile::tempdir().unwrap();
@@ -175,7 +181,40 @@ fn verify(scale: f64, level: f64) -> fastrack_grid::verify::RowReport {
     let row = written.manifest.teb_table.last().unwrap();
     assert_eq!(row.verification.as_ref(), Some(&reports[0].verification));
     assert_eq!(reports[0].verification.samples, required_samples(0.1, 0.01));
+    if check_shapes {
+        check_extents_at_served_levels(system, &evaluator, &written.manifest);
+    }
     reports[0].clone()
+}
+
+/// Every row's extent is that of `{V <= served level}`: against a dense scan of the `(x, v)` plane.
+fn check_extents_at_served_levels(system: &AffineSystem, evaluator: &Evaluator, manifest: &Manifest) {
+    let (x_dim, v_dim) = (&system.state[0], &system.state[1]);
+    let scan: Vec<(f64, f64)> = (0..=200)
+        .flat_map(|i| (0..=200).map(move |j| (i as f64 / 200.0, j as f64 / 200.0)))
+        .map(|(a, b)| (x_dim.min + a * (x_dim.max - x_dim.min), v_dim.min + b * (v_dim.max - v_dim.min)))
+        .collect();
+    let states: Vec<f32> = scan.iter().flat_map(|&(x, v)| [x as f32, v as f32]).collect();
+    let mut inside_domain = 0;
+    for row in &manifest.teb_table {
+        let served = row.served_level();
+        let values = evaluator.evaluate(&states, &vec![row.beta as f32; scan.len()]).unwrap().value;
+        let dense = scan
+            .iter()
+            .zip(&values)
+            .filter(|(_, &v)| f64::from(v) <= served)
+            .map(|((x, _), _)| x.abs())
+            .fold(0.0, f64::max);
+        assert!(
+            (row.extent[0] - dense).abs() <= 0.05 * served,
+            "beta {}: extent {:?} vs {dense}",
+            row.beta,
+            row.extent
+        );
+        assert!(row.boundary_radii.iter().all(|&r| r <= served), "no boundary radius beyond the level (V >= |x|)");
+        inside_domain += usize::from(dense < 0.9 * x_dim.max);
+    }
+    assert!(inside_domain >= 4, "only {inside_domain} rows' sets end inside the domain: the check needs some");
 }
 
 /// Level of the correct table, as a multiple of the grid's `V_min`.
@@ -190,7 +229,7 @@ fn grid_v_min() -> f64 {
 #[test]
 fn a_correct_table_reports_no_violations() {
     let level = LEVEL_FACTOR * grid_v_min();
-    let report = verify(1.0, level);
+    let report = verify_and_check_shapes(1.0, level, true);
     let v = &report.verification;
     eprintln!("correct table: level {level:.4}, verified {:.4}, {} of {} violations, worst-case {:.4}, random {:.4}, acceptance {:.4}",
         v.verified_level, v.violations, v.samples, report.worst_case_max, report.random_max, report.acceptance);

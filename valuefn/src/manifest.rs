@@ -135,9 +135,10 @@ pub struct TebRow {
     pub level: f64,
     /// The smallest value found by the search at this `beta`, before monotone correction.
     pub measured_min: f64,
-    /// Half-widths of the error set's bounding box along each error coordinate.
+    /// Half-widths of the bounding box of the error set `{r : V(r) <= served level}` along each error
+    /// coordinate.
     pub extent: Vec<f64>,
-    /// Radii of the error set's projection along [`boundary_directions`] (for drawing).
+    /// Radii of that set's projection onto the error coordinates along [`boundary_directions`] (for drawing).
     pub boundary_radii: Vec<f64>,
     /// Scenario verification of this row, once run.
     #[serde(default, skip_serializing_if = "Option::is_none")]

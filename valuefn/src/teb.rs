@@ -191,6 +191,25 @@ fn error_set_shape(
     Ok((extent, radii))
 }
 
+/// Recomputes each row's extent and boundary radii at its served level (`max(level, verified_level)`), as
+/// they must be once verification has raised a level: the shape clients draw is then that of the set the
+/// served radius bounds, not of the (much smaller) learned minimum level set.
+pub fn reshape_at_served_levels(
+    oracle: &dyn ValueOracle,
+    system: &AffineSystem,
+    rows: &mut [TebRow],
+    options: &TebOptions,
+) -> Result<(), String> {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(options.seed);
+    for row in rows {
+        let params = vec![row.beta; system.n_params()];
+        let (extent, boundary_radii) = error_set_shape(oracle, system, &params, row.served_level(), options, &mut rng)?;
+        row.extent = extent;
+        row.boundary_radii = boundary_radii;
+    }
+    Ok(())
+}
+
 /// Builds the TEB table of `oracle` for `system` (every parameter set to the row's `beta`).
 pub fn teb_table(oracle: &dyn ValueOracle, system: &AffineSystem, options: &TebOptions) -> Result<TebReport, String> {
     if options.rows < MIN_TEB_ROWS {
