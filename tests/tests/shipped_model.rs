@@ -1,9 +1,11 @@
-//! The shipped trained model `models/dubins4d/1`, served by the real server: it loads (checksum, schema,
-//! graph), says it is trained and verified, serves its table as written, and its values keep the property
-//! every value function has, `V >= l` (the error can only be at least the current one), on random states.
+//! The shipped trained model `models/dubins4d/2`, served by the real server: it loads (checksum, schema,
+//! graph), says it is trained and verified, serves its table as written, its values keep the property every
+//! value function has, `V >= l` (the error can only be at least the current one), on random states, and its
+//! served control never pushes the speed past the tracker's limits.
 
 use fastrack_client::{model_ref, pb};
 use fastrack_e2e::{evaluator_for, TestServer};
+use fastrack_valuefn::network::PeriodicEncoding;
 use rand::{Rng, SeedableRng};
 use std::path::Path;
 
@@ -13,8 +15,10 @@ const BELOW_L_TOLERANCE: f64 = 0.1;
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_shipped_dubins4d_model_is_trained_verified_and_served() {
     let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
-    let (evaluator, manifest) = evaluator_for(&repo.join("dubins4d/1"));
+    let (evaluator, manifest) = evaluator_for(&repo.join("dubins4d/2"));
     assert!(!manifest.untrained);
+    assert_eq!(manifest.network.periodic_encoding, PeriodicEncoding::Circle);
+    assert_eq!(manifest.state[3].limits, Some([0.1, 2.9]), "the speed limits");
     assert!(manifest.provenance.method.contains("supervised by grid solutions"), "{}", manifest.provenance.method);
     assert!(manifest.teb_table.len() >= 16);
     for row in &manifest.teb_table {
@@ -58,4 +62,31 @@ async fn the_shipped_dubins4d_model_is_trained_verified_and_served() {
     }
     eprintln!("min V - l over {n} random states: {lowest:.4}");
     assert!(lowest > -BELOW_L_TOLERANCE, "V falls {:.3} below l", -lowest);
+
+    // The served model says where the speed is held, and its control holds it there: at or above 2.9 m/s
+    // it never accelerates, at or below 0.1 m/s it never brakes, whatever the learned gradient says.
+    let info = client.get_model(model_ref("dubins4d", 0)).await.unwrap();
+    assert_eq!(info.state[3].limits, Some(pb::Interval { min: 0.1, max: 2.9 }));
+    for i in 0..n {
+        states[4 * i + 3] = if i % 2 == 0 { rng.random_range(2.9..3.0) } else { rng.random_range(0.0..=0.1) };
+    }
+    let at_limits = client
+        .tracking_control(model_ref("dubins4d", 0), states.clone(), params, pb::OutOfDomainPolicy::Reject)
+        .await
+        .unwrap();
+    let (mut braking, mut accelerating) = (0, 0);
+    for i in 0..n {
+        let alpha = at_limits.controls[2 * i + 1];
+        if i % 2 == 0 {
+            assert!(alpha <= 0.0, "v = {}: alpha {alpha}", states[4 * i + 3]);
+            braking += usize::from(alpha < 0.0);
+        } else {
+            assert!(alpha >= 0.0, "v = {}: alpha {alpha}", states[4 * i + 3]);
+            accelerating += usize::from(alpha > 0.0);
+        }
+    }
+    // Not a control stuck at zero: at each limit the learned gradient still decides between holding and
+    // moving inwards.
+    eprintln!("at the upper limit {braking} of {} brake; at the lower {accelerating} accelerate", n / 2);
+    assert!(braking > 0 && accelerating > 0);
 }
