@@ -36,6 +36,7 @@ pub fn flops_per_iteration(case: &Case, n_in: usize) -> f64 {
 
 /// Iterations per second of `case` on `device`, with `base` as the rest of the configuration.
 pub fn iterations_per_second(base: &TrainConfig, case: &Case, device: &Device) -> anyhow::Result<f64> {
+    crate::allocator::tune_for_training();
     let mut config = base.clone();
     config.network.hidden = vec![case.width; case.depth];
     config.sampling.points = case.points;

@@ -1,6 +1,7 @@
 //! The offline half of Parametric FaSTrack: DeepReach training of parametric value functions (burn) and
 //! their export as served, validated model bundles.
 
+pub mod allocator;
 pub mod bench;
 pub mod causal;
 pub mod config;

@@ -79,6 +79,9 @@ enum Command {
         /// Where the record goes.
         #[arg(long, default_value = "bench/results")]
         out: PathBuf,
+        /// Record name (`<out>/<record>.{json,md}`).
+        #[arg(long, default_value = "trainer-speed")]
+        record: String,
     },
     /// Exports a run's checkpoint as a model bundle (TEB table, manifest with provenance, reload check).
     Export {
@@ -182,7 +185,7 @@ fn main() -> anyhow::Result<()> {
                 state.iteration, config.optimizer.iterations, state.wall_time_s, state.last_losses
             );
         }
-        Command::Bench { config, out } => run_bench(&TrainConfig::load(&config)?, &out)?,
+        Command::Bench { config, out, record } => run_bench(&config, &out, &record)?,
         Command::PlotTeb { bundle, grid_solutions, out } => {
             let manifest = fastrack_valuefn::bundle::Bundle::load(&bundle)?.manifest;
             let mut grid = grid_solutions
@@ -241,7 +244,8 @@ fn main() -> anyhow::Result<()> {
 }
 
 /// Runs the training-speed benchmark and writes its record.
-fn run_bench(config: &TrainConfig, out: &std::path::Path) -> anyhow::Result<()> {
+fn run_bench(config_path: &std::path::Path, out: &std::path::Path, record: &str) -> anyhow::Result<()> {
+    let config = &TrainConfig::load(config_path)?;
     use fastrack_trainer::bench::{
         flops_per_iteration, iterations_per_second, matmul_gflops, torch_iterations_per_second, Case,
     };
@@ -291,11 +295,16 @@ fn run_bench(config: &TrainConfig, out: &std::path::Path) -> anyhow::Result<()> 
             "torch_iterations_per_s": torch.as_ref().ok().map(|t| t.0), "torch": torch.map(|t| t.1).unwrap_or_else(|e| e)}));
     }
     println!("matmul rate: {peak:.1} GFLOP/s\n\n{}", table.to_markdown());
+    let command = format!(
+        "cargo run --release -p fastrack-trainer -- bench --config {} --record {record}",
+        config_path.display()
+    );
     let path = write_record(
         out,
-        "trainer-speed",
-        "cargo run --release -p fastrack-trainer -- bench",
-        serde_json::json!({"system": config.system, "loss": config.loss.form, "parameter_mode": config.parameter_mode, "matmul_n": 2048}),
+        record,
+        &command,
+        serde_json::json!({"config": config_path, "system": config.system, "loss": config.loss.form,
+            "parameter_mode": config.parameter_mode, "periodic_encoding": config.network.periodic_encoding, "matmul_n": 2048}),
         serde_json::json!({"matmul_gflops": peak, "cases": figures}),
         &[("One DeepReach iteration (forward, explicit input gradient, HJI loss, backward, Adam)", &table)],
     )?;

@@ -110,6 +110,7 @@ pub struct Session<'a> {
 
 /// Trains (or continues) a run; returns the network and the final state.
 pub fn train(config: &TrainConfig, device: &Device, session: Session<'_>) -> anyhow::Result<(ValueNetwork, RunState)> {
+    crate::allocator::tune_for_training();
     let system = config.system()?;
     let mut network = initial_network(config, &system);
     let mut model = Siren::from_network(&network, device);
