@@ -22,7 +22,15 @@ fn solved(dir: &Path, name: &str, system: &AffineSystem, params: &[f64], horizon
 }
 
 fn config(solutions: Vec<PathBuf>) -> SupervisionConfig {
-    SupervisionConfig { solutions, weight: 1.0, gradient_weight: 0.0, points: 500, focus_share: 0.5, focus_factor: 2.0 }
+    SupervisionConfig {
+        solutions,
+        weight: 1.0,
+        gradient_weight: 0.0,
+        points: 500,
+        focus_share: 0.5,
+        focus_factor: 2.0,
+        under_weight: 1.0,
+    }
 }
 
 fn refusal(config: &SupervisionConfig, system: &AffineSystem, tau_max: f64) -> String {
