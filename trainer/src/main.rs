@@ -95,7 +95,7 @@ enum Command {
     /// Draws a bundle's TEB table (served level, measured `V_min`) against `beta`, with grid solutions'
     /// `V_min` beside it.
     PlotTeb {
-        /// The bundle's version folder, e.g. `models/dubins4d/2`.
+        /// The bundle's version folder, e.g. `models/dubins4d/3`.
         #[arg(long)]
         bundle: PathBuf,
         /// Grid solution files (`.ftgrid`) whose `V_min` is drawn as the reference.
