@@ -6,7 +6,8 @@
 //! and Lax-Friedrichs dissipation), [`scheme`] (the parallel semi-discrete right-hand side), [`integrate`]
 //! (TVD Runge-Kutta), [`solver`] (the tracking value iteration to convergence). Around it: [`analysis`]
 //! (TEB of a solution), [`format`] (the `.ftgrid` file), [`compare`] (a model bundle against grid solutions),
-//! [`verify`] (scenario verification of a bundle's TEB table), [`plot`] (PNG figures).
+//! [`verify`] (scenario verification of a bundle's TEB table), [`rollout`] (what planners force against a grid
+//! solution's own policy), [`plot`] (PNG figures).
 
 pub mod analysis;
 pub mod compare;
@@ -15,6 +16,7 @@ pub mod grid;
 pub mod hamiltonian;
 pub mod integrate;
 pub mod plot;
+pub mod rollout;
 pub mod scheme;
 pub mod solver;
 pub mod upwind;

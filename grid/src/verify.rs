@@ -199,16 +199,16 @@ fn sample_sublevel_set(
     Ok((accepted, inside as f64 / proposed as f64))
 }
 
-fn random_vertex(system: &AffineSystem, params: &[f64], rng: &mut StdRng) -> Vec<f64> {
+pub(crate) fn random_vertex(system: &AffineSystem, params: &[f64], rng: &mut StdRng) -> Vec<f64> {
     system.planner_input_param.iter().map(|&k| if rng.random_bool(0.5) { params[k] } else { -params[k] }).collect()
 }
 
-fn exponential(mean: f64, rng: &mut StdRng) -> f64 {
+pub(crate) fn exponential(mean: f64, rng: &mut StdRng) -> f64 {
     -mean * (1.0 - rng.random::<f64>()).ln()
 }
 
 /// RK4 step of `r' = f(r) + G_u u + G_p u_p + G_d d` with the inputs held.
-fn rk4(system: &AffineSystem, r: &mut [f64], inputs: (&[f64], &[f64], &[f64]), h: f64) {
+pub(crate) fn rk4(system: &AffineSystem, r: &mut [f64], inputs: (&[f64], &[f64], &[f64]), h: f64) {
     let (u, u_p, d) = inputs;
     let n = r.len();
     let f = |x: &[f64], out: &mut [f64]| system.dynamics(x, u, u_p, d, out);

@@ -52,7 +52,8 @@ pub struct SolveOptions {
     /// Largest horizon integrated (s).
     #[arg(long, default_value_t = 30.0)]
     pub horizon_cap: f64,
-    /// Converged when max |dV/dtau| over the grid (or the --converge-on set) falls below this (m/s).
+    /// Converged when max |dV/dtau| over the grid (or the --converge-on set), measured over --rate-window,
+    /// falls below this (m/s).
     #[arg(long, default_value_t = 0.01)]
     pub tolerance: f64,
     /// Where the convergence test looks: `grid` (every node) or `sublevel` ({V <= V_min (1 + --set-margin)}
@@ -62,7 +63,12 @@ pub struct SolveOptions {
     /// Relative margin of the sublevel convergence set above V_min.
     #[arg(long, default_value_t = ConvergenceSet::DIAGNOSTIC.margin)]
     pub set_margin: f64,
-    /// Converged only once the rate has stayed below --tolerance for this long (s); 0 stops at the first step.
+    /// Horizon (s) over which the rate is measured: max |V(tau) - V(tau - w)| / w at the end of each window;
+    /// 0 measures every step on its own, which also counts the scheme's step-to-step oscillation.
+    #[arg(long, default_value_t = 2.0)]
+    pub rate_window: f64,
+    /// Converged only once the rate has stayed below --tolerance for this long (s); 0 stops at the first step
+    /// (or window) below it.
     #[arg(long, default_value_t = 0.0)]
     pub settle_time: f64,
     /// Nodes left out of the sublevel convergence set next to each non-periodic edge.
@@ -86,6 +92,7 @@ impl SolveOptions {
             cfl: self.cfl,
             horizon_cap: self.horizon_cap,
             tolerance: self.tolerance,
+            rate_window: self.rate_window,
             tracking: true,
             converge_on: (self.converge_on == "sublevel")
                 .then_some(ConvergenceSet { margin: self.set_margin, edge_nodes: self.edge_nodes }),

@@ -1,11 +1,12 @@
 //! `horizon`: how `V_min` and `max |dV/dtau|` evolve with the horizon, by region (whole grid, interior away from
 //! the non-periodic edges, the sublevel set near `V_min`), across resolutions and `beta`; the horizon at which
-//! the sublevel-set rate first falls below a tolerance; plots and a measurement record.
+//! the sublevel-set rate first falls below a tolerance (over the solve's rate windows when it has them, else per
+//! step); plots and a measurement record.
 
 use super::common::{command_line, SolveOptions, StudyOutputs};
 use super::table::solve_or_load;
 use fastrack_grid::analysis::{teb, EXTENT_REL_TOL};
-use fastrack_grid::solver::{ConvergenceSet, HistoryPoint, Solution};
+use fastrack_grid::solver::{ConvergenceSet, HistoryPoint, Solution, WindowRates};
 use fastrack_valuefn::plot::{line_chart, Chart, Series};
 use fastrack_valuefn::record::{write_record, Table};
 use serde_json::json;
@@ -25,7 +26,7 @@ pub struct Args {
     #[arg(long, value_delimiter = ',', default_value = "5,10,15,20,25,30")]
     at: Vec<f64>,
     /// The converged horizon reported is the first recorded one where max |dV/dtau| over the convergence set
-    /// (--set-margin, --edge-nodes) is below this (m/s).
+    /// (--set-margin, --edge-nodes; over the rate window when --rate-window is set) is below this (m/s).
     #[arg(long, default_value_t = 0.01)]
     report_tolerance: f64,
     /// ... and stays below it over the recorded history for this long (s).
@@ -55,6 +56,11 @@ fn at(history: &[HistoryPoint], tau: f64) -> Option<&HistoryPoint> {
     history.iter().take_while(|h| h.tau <= tau + 1e-9).last()
 }
 
+/// The last rate window ending at or before `tau`.
+fn window_at(history: &[HistoryPoint], tau: f64) -> Option<WindowRates> {
+    history.iter().take_while(|h| h.tau <= tau + 1e-9).filter_map(|h| h.window).last()
+}
+
 fn fmt(x: Option<f64>, digits: usize) -> String {
     x.map_or("-".into(), |x| format!("{x:.digits$}"))
 }
@@ -66,16 +72,29 @@ fn creep(history: &[HistoryPoint], span: f64) -> Option<f64> {
     (last.tau > first.tau).then(|| (last.v_min - first.v_min) / (last.tau - first.tau))
 }
 
+/// The rate on the convergence set that a history point reports: over its rate window when the solve measured
+/// windows, else over its step.
+fn set_rate(h: &HistoryPoint, windowed: bool) -> Option<f64> {
+    if windowed {
+        h.window.map(|w| w.regions.set)
+    } else {
+        h.regions.map(|r| r.set)
+    }
+}
+
 /// The first recorded point from which the set rate stays below `tolerance` for `settle` seconds of history.
-fn settled(history: &[HistoryPoint], tolerance: f64, settle: f64) -> Option<HistoryPoint> {
-    let below = |h: &HistoryPoint| h.regions.is_some_and(|r| r.set < tolerance);
-    let end = history.last()?.tau;
-    history
+fn settled(history: &[HistoryPoint], windowed: bool, tolerance: f64, settle: f64) -> Option<HistoryPoint> {
+    let measured: Vec<(HistoryPoint, f64)> =
+        history.iter().filter_map(|h| set_rate(h, windowed).map(|rate| (*h, rate))).collect();
+    let end = measured.last()?.0.tau;
+    measured
         .iter()
         .enumerate()
-        .filter(|(_, h)| h.tau + settle <= end + 1e-9)
-        .find(|(i, h)| history[*i..].iter().take_while(|g| g.tau <= h.tau + settle + 1e-9).all(below))
-        .map(|(_, h)| *h)
+        .filter(|(_, (h, _))| h.tau + settle <= end + 1e-9)
+        .find(|(i, (h, _))| {
+            measured[*i..].iter().take_while(|(g, _)| g.tau <= h.tau + settle + 1e-9).all(|(_, r)| *r < tolerance)
+        })
+        .map(|(_, (h, _))| *h)
 }
 
 /// The first recorded point where `(V_min(tau) - V_min(tau - window)) / window < tolerance`.
@@ -102,15 +121,20 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             let options = SolveOptions { resolution: resolution.clone(), ..args.solve.clone() };
             let solution = solve_or_load(&system, &options, beta, &args.outputs.solutions_dir)?;
             let label = solution.grid.axes().iter().map(|a| a.n.to_string()).collect::<Vec<_>>().join("x");
-            let settled = settled(&solution.info.history, args.report_tolerance, args.report_settle_time);
+            let windowed = solution.info.config.rate_window > 0.0;
+            let settled = settled(&solution.info.history, windowed, args.report_tolerance, args.report_settle_time);
             let vmin_settled = vmin_settled(&solution.info.history, args.report_tolerance, args.vmin_window);
             let last = solution.info.history.last();
             println!(
-                "{label} beta={beta}: V_min {:.4} at {:.1} s, set rate {} (grid {}), settled {}, wall {:.1} s",
+                "{label} beta={beta}: V_min {:.4} at {:.1} s, set rate {} (grid {}){}, settled {}, wall {:.1} s",
                 last.map_or(f64::NAN, |h| h.v_min),
                 solution.info.horizon,
                 fmt(last.and_then(|h| h.regions).map(|r| r.set), 4),
                 fmt(last.and_then(|h| h.rate), 4),
+                last.and_then(|h| h.window).map_or(String::new(), |w| format!(
+                    ", over the last {:.1} s: set {:.4} grid {:.4}",
+                    w.span, w.regions.set, w.grid
+                )),
                 settled.map_or("never".into(), |h| format!("at {:.1} s, V_min {:.4}", h.tau, h.v_min)),
                 solution.info.wall_s
             );
@@ -139,6 +163,8 @@ fn write_outputs(args: &Args, set: ConvergenceSet, studies: &[Study], name: &str
         "set near edges",
         "worst node: nodes from edge",
         "worst node: V - V_min",
+        "over the last window: grid",
+        "set",
     ]);
     let mut settled_table = Table::new(&[
         "grid",
@@ -169,6 +195,8 @@ fn write_outputs(args: &Args, set: ConvergenceSet, studies: &[Study], name: &str
                 format!("{:.4}", r.set_edge),
                 r.worst_edge_distance.to_string(),
                 format!("{:.3}", r.worst_excess),
+                fmt(window_at(history, h.tau).map(|w| w.grid), 4),
+                fmt(window_at(history, h.tau).map(|w| w.regions.set), 4),
             ]);
         }
         let teb = teb(&s.solution, &system, EXTENT_REL_TOL);
@@ -203,7 +231,10 @@ fn write_outputs(args: &Args, set: ConvergenceSet, studies: &[Study], name: &str
     let set_png = dir.join(format!("{name}-set-rate-vs-horizon.png"));
     let title = format!("{}: max |dV/dtau| on {{V <= {} V_min}}, interior", system.id, 1.0 + set.margin);
     let chart = Chart { title: &title, x_label: "horizon tau (s)", y_label: "max |dV/dtau| (m/s)", log_y: true };
-    line_chart(&set_png, &chart, &series(&|h| h.regions.map(|r| r.set), "")).map_err(anyhow::Error::msg)?;
+    let mut set_series = series(&|h| h.regions.map(|r| r.set), ", per step");
+    set_series.extend(series(&|h| h.window.map(|w| w.regions.set), ", over the rate window"));
+    set_series.retain(|s| !s.points.is_empty());
+    line_chart(&set_png, &chart, &set_series).map_err(anyhow::Error::msg)?;
     let grid_png = dir.join(format!("{name}-grid-rate-vs-horizon.png"));
     let title = format!("{}: max |dV/dtau| over the whole grid", system.id);
     let chart = Chart { title: &title, x_label: "horizon tau (s)", y_label: "max |dV/dtau| (m/s)", log_y: true };
@@ -215,7 +246,8 @@ fn write_outputs(args: &Args, set: ConvergenceSet, studies: &[Study], name: &str
             "beta": s.beta, "horizon": s.solution.info.horizon, "converged": s.solution.info.converged,
             "steps": s.solution.info.steps, "dt": s.solution.info.dt, "wall_s": s.solution.info.wall_s,
             "settled": s.settled, "vmin_settled": s.vmin_settled,
-            "history": s.solution.info.history.iter().step_by(5).collect::<Vec<_>>(),
+            "history": s.solution.info.history.iter().enumerate()
+                .filter(|(i, h)| i % 5 == 0 || h.window.is_some()).map(|(_, h)| h).collect::<Vec<_>>(),
         })).collect::<Vec<_>>(),
         "plots": plots,
     });

@@ -4,6 +4,7 @@ mod bench;
 mod common;
 mod compare;
 mod horizon;
+mod rollout;
 mod solve;
 mod table;
 mod verify;
@@ -38,6 +39,9 @@ enum Command {
     /// Scenario verification of a bundle's TEB table (rollouts of the served control from its sublevel sets);
     /// writes verified levels into a copy of the bundle.
     Verify(verify::Args),
+    /// What adversarial planners sustain against grid solutions' own tracker policies (an independent check of
+    /// their V_min by simulation), with a V_min-vs-horizon plot and a record.
+    Rollout(rollout::Args),
     /// Throughput of a 4-D WENO5 + RK3 solve (points updated per second per core), beside hj_reachability.
     Bench(bench::Args),
 }
@@ -50,6 +54,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Horizon(args) => horizon::run(args),
         Command::Compare(args) => compare::run(args),
         Command::Verify(args) => verify::run(args),
+        Command::Rollout(args) => rollout::run(args),
         Command::Bench(args) => bench::run(args),
     }
 }

@@ -39,10 +39,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     println!("V_min {:.5}  at {:?}", teb.v_min, teb.argmin.iter().map(|x| (x * 1e4).round() / 1e4).collect::<Vec<_>>());
     println!("extent of {{V <= V_min (1 + {})}}: {:?} ({} nodes)", teb.rel_tol, teb.extent, teb.set_nodes);
     println!(
-        "horizon {:.3} s ({}, final max|dV/dtau| {:.2e}, tolerance {:.1e}), {} steps of {:.5} s, wall {:.1} s",
+        "horizon {:.3} s ({}, last tested max|dV/dtau| {:.2e}{}, tolerance {:.1e}), {} steps of {:.5} s, wall {:.1} s",
         info.horizon,
         if info.converged { "converged" } else { "NOT converged: horizon cap reached" },
-        info.final_rate,
+        info.tested_rate().unwrap_or(f64::NAN),
+        if info.config.rate_window > 0.0 { format!(" over {} s", info.config.rate_window) } else { String::new() },
         info.config.tolerance,
         info.steps,
         info.dt,

@@ -49,6 +49,9 @@ pub fn solution_path(dir: &Path, system: &str, beta: f64, resolution: &[usize], 
         Some(set) => format!("-set{}e{}", set.margin, set.edge_nodes),
         None => String::new(),
     };
+    if config.rate_window > 0.0 {
+        set += &format!("-win{}", config.rate_window);
+    }
     if config.settle_time > 0.0 {
         set += &format!("-settle{}", config.settle_time);
     }
@@ -248,7 +251,7 @@ fn write_outputs(
             "accuracy": e.accuracy, "resolution": e.solution.grid.axes().iter().map(|a| a.n).collect::<Vec<_>>(),
             "bounds": e.solution.grid.axes().iter().map(|a| [a.min, a.max]).collect::<Vec<_>>(),
             "beta": e.beta, "teb": e.teb, "horizon": e.solution.info.horizon, "converged": e.solution.info.converged,
-            "final_rate": e.solution.info.final_rate, "steps": e.solution.info.steps, "dt": e.solution.info.dt,
+            "final_rate": e.solution.info.final_rate, "tested_rate": e.solution.info.tested_rate(), "steps": e.solution.info.steps, "dt": e.solution.info.dt,
             "wall_s": e.solution.info.wall_s,
             "history": e.solution.info.history.iter().step_by(5).collect::<Vec<_>>(),
         })).collect::<Vec<_>>(),

@@ -1,0 +1,158 @@
+//! `rollout`: what adversarial planners sustain against grid solutions' own tracker policies, beside each
+//! solution's `V_min` against the horizon; a table, a plot and a record.
+
+use super::common::command_line;
+use anyhow::Context;
+use fastrack_grid::format::load;
+use fastrack_grid::rollout::{roll_out_solution, RolloutOptions, RolloutReport};
+use fastrack_grid::solver::Solution;
+use fastrack_valuefn::plot::{line_chart, Chart, Series};
+use fastrack_valuefn::record::{write_record, Table};
+use fastrack_valuefn::system::by_id;
+use serde_json::json;
+use std::path::PathBuf;
+
+/// Arguments of `rollout`.
+#[derive(clap::Args)]
+pub struct Args {
+    /// Solution files (`.ftgrid`), comma separated.
+    #[arg(long, value_delimiter = ',', required = true)]
+    solutions: Vec<PathBuf>,
+    /// Rollout horizon (s); the sustained error is the largest over its second half.
+    #[arg(long, default_value_t = 60.0)]
+    horizon: f64,
+    /// RK4 step (s); control and planner are held over a step.
+    #[arg(long, default_value_t = 0.01)]
+    step: f64,
+    /// Starts are the nodes of {V <= (1 + margin) V_min}.
+    #[arg(long, default_value_t = 0.02)]
+    start_margin: f64,
+    /// Largest number of starts per solution (the set's nodes thinned evenly).
+    #[arg(long, default_value_t = 200)]
+    max_starts: usize,
+    /// Random bang-bang planners per start, besides the worst-case planner.
+    #[arg(long, default_value_t = 4)]
+    random_planners: usize,
+    /// Mean time between a random planner's switches (s).
+    #[arg(long, default_value_t = 1.0)]
+    mean_dwell: f64,
+    /// Random seed.
+    #[arg(long, default_value_t = 11)]
+    seed: u64,
+    /// Record name (`<results-dir>/<record>.{json,md}` and a PNG beside it); none without it.
+    #[arg(long)]
+    record: Option<String>,
+    /// Folder of measurement records and plots.
+    #[arg(long, default_value = "bench/results")]
+    results_dir: PathBuf,
+}
+
+fn label(solution: &Solution) -> String {
+    let grid = solution.grid.axes().iter().map(|a| a.n.to_string()).collect::<Vec<_>>().join("x");
+    format!("beta {:?} ({grid})", solution.info.params)
+}
+
+/// Runs `rollout`.
+pub fn run(args: Args) -> anyhow::Result<()> {
+    let options = RolloutOptions {
+        horizon: args.horizon,
+        step: args.step,
+        start_margin: args.start_margin,
+        max_starts: args.max_starts,
+        random_planners: args.random_planners,
+        mean_dwell: args.mean_dwell,
+        seed: args.seed,
+    };
+    let mut results: Vec<(PathBuf, Solution, RolloutReport)> = Vec::new();
+    for path in &args.solutions {
+        let solution = load(path).with_context(|| format!("loading {}", path.display()))?;
+        let system = by_id(&solution.info.system)
+            .with_context(|| format!("{}: unknown system `{}`", path.display(), solution.info.system))?;
+        let report = roll_out_solution(&system, &solution, &options)?;
+        println!(
+            "{} at {:.1} s: V_min {:.4}; sustained over the last {:.0} s: worst-case planner {:.4}, random {:.4} ({:.2} V_min); {} starts, {} rollouts left the domain",
+            label(&solution),
+            solution.info.horizon,
+            report.v_min,
+            options.horizon / 2.0,
+            report.sustained_worst_case,
+            report.sustained_random,
+            report.sustained() / report.v_min,
+            report.starts,
+            report.left_domain
+        );
+        results.push((path.clone(), solution, report));
+    }
+    if let Some(name) = &args.record {
+        write_outputs(&args, &options, &results, name)?;
+    }
+    Ok(())
+}
+
+fn write_outputs(
+    args: &Args,
+    options: &RolloutOptions,
+    results: &[(PathBuf, Solution, RolloutReport)],
+    name: &str,
+) -> anyhow::Result<()> {
+    let mut table = Table::new(&[
+        "solution",
+        "solved to (s)",
+        "V_min",
+        "sustained: worst-case planner",
+        "random planners",
+        "sustained / V_min",
+        "starts",
+        "left the domain",
+    ]);
+    let mut series = Vec::new();
+    for (_, solution, report) in results {
+        table.row(vec![
+            label(solution),
+            format!("{:.1}", solution.info.horizon),
+            format!("{:.4}", report.v_min),
+            format!("{:.4}", report.sustained_worst_case),
+            format!("{:.4}", report.sustained_random),
+            format!("{:.3}", report.sustained() / report.v_min),
+            report.starts.to_string(),
+            report.left_domain.to_string(),
+        ]);
+        series.push(Series {
+            label: format!("{}: V_min", label(solution)),
+            points: solution.info.history.iter().map(|h| (h.tau, h.v_min)).collect(),
+            markers: false,
+        });
+        series.push(Series {
+            label: format!("{}: sustained error", label(solution)),
+            points: vec![(0.0, report.sustained()), (solution.info.horizon, report.sustained())],
+            markers: false,
+        });
+    }
+    std::fs::create_dir_all(&args.results_dir)?;
+    let png = args.results_dir.join(format!("{name}-vmin-vs-sustained.png"));
+    let chart = Chart {
+        title: "grid V_min vs horizon, and the error planners sustain against its policy",
+        x_label: "horizon tau (s)",
+        y_label: "m",
+        log_y: false,
+    };
+    line_chart(&png, &chart, &series).map_err(anyhow::Error::msg)?;
+    let figures = json!({
+        "solutions": results.iter().map(|(path, s, r)| json!({
+            "path": path, "system": s.info.system, "params": s.info.params,
+            "resolution": s.grid.axes().iter().map(|a| a.n).collect::<Vec<_>>(),
+            "solved_to": s.info.horizon, "report": r,
+        })).collect::<Vec<_>>(),
+        "plot": png,
+    });
+    let path = write_record(
+        &args.results_dir,
+        name,
+        &command_line(),
+        json!({ "rollout": options }),
+        figures,
+        &[("sustained error against each solution's policy", &table)],
+    )?;
+    println!("wrote {} and {}", path.display(), png.display());
+    Ok(())
+}
