@@ -68,9 +68,11 @@ pub fn line_chart(path: &Path, chart: &Chart<'_>, series: &[Series]) -> Result<(
         y0 = y0.min(y);
         y1 = y1.max(y);
     }
-    if x0 >= x1 || y0 > y1 {
+    if x0 > x1 || y0 > y1 {
         return Err(format!("nothing to plot in {}", path.display()));
     }
+    // Points at a single x (e.g. one parameter value) get an x range around it.
+    let (x0, x1) = if x0 == x1 { (x0 - 0.1 * x0.abs().max(1.0), x1 + 0.1 * x1.abs().max(1.0)) } else { (x0, x1) };
     let pad = if chart.log_y { 0.0 } else { 0.05 * (y1 - y0).max(1e-9) };
     let (y0, y1) = if chart.log_y { (y0 * 0.8, y1 * 1.25) } else { (y0 - pad, y1 + pad) };
     let text = fonts_available();
@@ -125,4 +127,21 @@ pub fn line_chart(path: &Path, chart: &Chart<'_>, series: &[Series]) -> Result<(
     }
     root.present().map_err(|e| fail(&e))?;
     Ok(())
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    #[test]
+    fn a_chart_of_points_at_one_x_is_drawn_and_one_without_finite_points_is_refused() {
+        let dir = tempfile::tempdir().unwrap();
+        let chart = Chart { title: "t", x_label: "x", y_label: "y", log_y: false };
+        let single = [Series { label: "a".into(), points: vec![(1.0, 1.0), (1.0, 1.2)], markers: true }];
+        let path = dir.path().join("single.png");
+        line_chart(&path, &chart, &single).unwrap();
+        assert!(std::fs::metadata(&path).unwrap().len() > 0);
+        let empty = [Series { label: "a".into(), points: vec![(f64::NAN, 1.0)], markers: true }];
+        assert!(line_chart(&dir.path().join("empty.png"), &chart, &empty).is_err());
+    }
 }

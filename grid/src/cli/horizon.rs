@@ -56,9 +56,12 @@ fn at(history: &[HistoryPoint], tau: f64) -> Option<&HistoryPoint> {
     history.iter().take_while(|h| h.tau <= tau + 1e-9).last()
 }
 
-/// The last rate window ending at or before `tau`.
-fn window_at(history: &[HistoryPoint], tau: f64) -> Option<WindowRates> {
-    history.iter().take_while(|h| h.tau <= tau + 1e-9).filter_map(|h| h.window).last()
+/// The rate window ending nearest `tau`, and its end.
+fn window_near(history: &[HistoryPoint], tau: f64) -> Option<(f64, WindowRates)> {
+    history
+        .iter()
+        .filter_map(|h| h.window.map(|w| (h.tau, w)))
+        .min_by(|a, b| (a.0 - tau).abs().total_cmp(&(b.0 - tau).abs()))
 }
 
 fn fmt(x: Option<f64>, digits: usize) -> String {
@@ -163,7 +166,8 @@ fn write_outputs(args: &Args, set: ConvergenceSet, studies: &[Study], name: &str
         "set near edges",
         "worst node: nodes from edge",
         "worst node: V - V_min",
-        "over the last window: grid",
+        "window ending nearest (s)",
+        "over it: grid",
         "set",
     ]);
     let mut settled_table = Table::new(&[
@@ -195,8 +199,9 @@ fn write_outputs(args: &Args, set: ConvergenceSet, studies: &[Study], name: &str
                 format!("{:.4}", r.set_edge),
                 r.worst_edge_distance.to_string(),
                 format!("{:.3}", r.worst_excess),
-                fmt(window_at(history, h.tau).map(|w| w.grid), 4),
-                fmt(window_at(history, h.tau).map(|w| w.regions.set), 4),
+                fmt(window_near(history, h.tau).map(|(end, _)| end), 1),
+                fmt(window_near(history, h.tau).map(|(_, w)| w.grid), 4),
+                fmt(window_near(history, h.tau).map(|(_, w)| w.regions.set), 4),
             ]);
         }
         let teb = teb(&s.solution, &system, EXTENT_REL_TOL);

@@ -40,7 +40,7 @@ enum Command {
     /// writes verified levels into a copy of the bundle.
     Verify(verify::Args),
     /// What adversarial planners sustain against grid solutions' own tracker policies (an independent check of
-    /// their V_min by simulation), with a V_min-vs-horizon plot and a record.
+    /// their V_min by simulation), with a plot against beta and a record.
     Rollout(rollout::Args),
     /// Throughput of a 4-D WENO5 + RK3 solve (points updated per second per core), beside hj_reachability.
     Bench(bench::Args),

@@ -1,5 +1,5 @@
 //! `rollout`: what adversarial planners sustain against grid solutions' own tracker policies, beside each
-//! solution's `V_min` against the horizon; a table, a plot and a record.
+//! solution's `V_min`; a table, a plot against `beta` and a record.
 
 use super::common::command_line;
 use anyhow::Context;
@@ -45,6 +45,13 @@ pub struct Args {
     /// Folder of measurement records and plots.
     #[arg(long, default_value = "bench/results")]
     results_dir: PathBuf,
+}
+
+/// The solutions of one system and resolution, as `(beta, value)` points.
+struct Group {
+    key: String,
+    v_min: Vec<(f64, f64)>,
+    sustained: Vec<(f64, f64)>,
 }
 
 fn label(solution: &Solution) -> String {
@@ -105,7 +112,6 @@ fn write_outputs(
         "starts",
         "left the domain",
     ]);
-    let mut series = Vec::new();
     for (_, solution, report) in results {
         table.row(vec![
             label(solution),
@@ -117,22 +123,34 @@ fn write_outputs(
             report.starts.to_string(),
             report.left_domain.to_string(),
         ]);
-        series.push(Series {
-            label: format!("{}: V_min", label(solution)),
-            points: solution.info.history.iter().map(|h| (h.tau, h.v_min)).collect(),
-            markers: false,
-        });
-        series.push(Series {
-            label: format!("{}: sustained error", label(solution)),
-            points: vec![(0.0, report.sustained()), (solution.info.horizon, report.sustained())],
-            markers: false,
-        });
     }
+    // Per system and resolution: the solutions' V_min and the sustained errors against the first parameter.
+    let mut groups: Vec<Group> = Vec::new();
+    for (_, solution, report) in results {
+        let grid = solution.grid.axes().iter().map(|a| a.n.to_string()).collect::<Vec<_>>().join("x");
+        let key = format!("{} {grid}", solution.info.system);
+        let beta = solution.info.params.first().copied().unwrap_or(f64::NAN);
+        let index = groups.iter().position(|g| g.key == key).unwrap_or_else(|| {
+            groups.push(Group { key, v_min: Vec::new(), sustained: Vec::new() });
+            groups.len() - 1
+        });
+        groups[index].v_min.push((beta, report.v_min));
+        groups[index].sustained.push((beta, report.sustained()));
+    }
+    let series: Vec<Series> = groups
+        .into_iter()
+        .flat_map(|g| {
+            [
+                Series { label: format!("{}: grid V_min at its horizon", g.key), points: g.v_min, markers: true },
+                Series { label: format!("{}: error planners sustain", g.key), points: g.sustained, markers: true },
+            ]
+        })
+        .collect();
     std::fs::create_dir_all(&args.results_dir)?;
     let png = args.results_dir.join(format!("{name}-vmin-vs-sustained.png"));
     let chart = Chart {
-        title: "grid V_min vs horizon, and the error planners sustain against its policy",
-        x_label: "horizon tau (s)",
+        title: "grid V_min and the error planners sustain against its policy",
+        x_label: "beta (m/s)",
         y_label: "m",
         log_y: false,
     };
