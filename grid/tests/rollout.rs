@@ -20,14 +20,15 @@ fn planners_sustain_the_closed_form_teb_against_a_converged_policy() {
     eprintln!("{report:?}, closed form {teb}");
     assert_eq!(report.left_domain, 0);
     assert!(report.starts > 50, "{} starts", report.starts);
-    for (planner, sustained) in [("worst-case", report.sustained_worst_case), ("random", report.sustained_random)] {
+    let random = report.sustained_random.expect("4 random planners per start by default");
+    for (planner, sustained) in [("worst-case", report.sustained_worst_case), ("random", random)] {
         let ratio = sustained / teb;
         assert!((0.95..1.08).contains(&ratio), "{planner} planners sustain {ratio:.4} of the closed-form TEB");
     }
 }
 
 #[test]
-fn bad_options_and_a_solution_of_another_system_are_refused() {
+fn bad_options_and_a_solution_of_another_system_are_refused_and_no_random_planners_report_none() {
     let system = system();
     let grid = Grid::for_system(&system, &[21, 11]).unwrap();
     let config = SolverConfig { horizon_cap: 0.1, ..SolverConfig::default() };
@@ -44,6 +45,10 @@ fn bad_options_and_a_solution_of_another_system_are_refused() {
             "{options:?}"
         );
     }
+    let worst_case_only = RolloutOptions { horizon: 1.0, random_planners: 0, ..RolloutOptions::default() };
+    let report = roll_out_solution(&system, &solution, &worst_case_only).unwrap();
+    assert_eq!(report.sustained_random, None);
+    assert_eq!(report.sustained(), report.sustained_worst_case);
     let dubins = fastrack_valuefn::system::by_id("dubins4d").unwrap();
     let error = roll_out_solution(&dubins, &solution, &RolloutOptions::default()).unwrap_err();
     assert!(matches!(error, RolloutError::System { .. }), "{error}");

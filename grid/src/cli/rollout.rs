@@ -77,13 +77,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .with_context(|| format!("{}: unknown system `{}`", path.display(), solution.info.system))?;
         let report = roll_out_solution(&system, &solution, &options)?;
         println!(
-            "{} at {:.1} s: V_min {:.4}; sustained over the last {:.0} s: worst-case planner {:.4}, random {:.4} ({:.2} V_min); {} starts, {} rollouts left the domain",
+            "{} at {:.1} s: V_min {:.4}; sustained over the last {:.0} s: worst-case planner {:.4}, random {} ({:.2} V_min); {} starts, {} rollouts left the domain",
             label(&solution),
             solution.info.horizon,
             report.v_min,
             options.horizon / 2.0,
             report.sustained_worst_case,
-            report.sustained_random,
+            report.sustained_random.map_or("-".into(), |r| format!("{r:.4}")),
             report.sustained() / report.v_min,
             report.starts,
             report.left_domain
@@ -118,7 +118,7 @@ fn write_outputs(
             format!("{:.1}", solution.info.horizon),
             format!("{:.4}", report.v_min),
             format!("{:.4}", report.sustained_worst_case),
-            format!("{:.4}", report.sustained_random),
+            report.sustained_random.map_or("-".into(), |r| format!("{r:.4}")),
             format!("{:.3}", report.sustained() / report.v_min),
             report.starts.to_string(),
             report.left_domain.to_string(),
