@@ -14,7 +14,7 @@
 //! they can exploit.
 
 use crate::solver::Solution;
-use crate::verify::{exponential, random_vertex, rk4};
+use crate::verify::{rk4, Planner};
 use fastrack_valuefn::system::AffineSystem;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
@@ -135,18 +135,13 @@ fn gradient(solution: &Solution, r: &[f64], shifted: &mut [f64], out: &mut [f64]
     }
 }
 
-/// One planner of a rollout.
-enum Planner {
-    WorstCase,
-    BangBang { rng: Box<StdRng>, input: Vec<f64>, next_switch: f64 },
-}
-
 /// `(sustained error, peak error, left the domain)` of one rollout from `start`.
 fn roll_out(
     system: &AffineSystem,
     solution: &Solution,
     start: &[f64],
     mut planner: Planner,
+    rng: &mut StdRng,
     options: &RolloutOptions,
 ) -> (f64, f64, bool) {
     let params = &solution.info.params;
@@ -159,16 +154,7 @@ fn roll_out(
         let t = k as f64 * options.step;
         gradient(solution, &r, &mut shifted, &mut p);
         let u = system.optimal_control(&r, &p);
-        let u_p = match &mut planner {
-            Planner::WorstCase => system.worst_planner(&p, params),
-            Planner::BangBang { rng, input, next_switch } => {
-                if t >= *next_switch {
-                    *input = random_vertex(system, params, rng);
-                    *next_switch = t + exponential(options.mean_dwell, rng);
-                }
-                input.clone()
-            }
-        };
+        let u_p = planner.input(system, params, &p, t, options.mean_dwell, rng);
         rk4(system, &mut r, (&u, &u_p, &d), options.step);
         let error = system.tracking_error(&r);
         peak = peak.max(error);
@@ -213,18 +199,10 @@ pub fn roll_out_solution(
         .enumerate()
         .flat_map_iter(|(i, start)| {
             (0..=options.random_planners).map(move |j| {
-                let planner = if j == 0 {
-                    Planner::WorstCase
-                } else {
-                    let seed =
-                        options.seed ^ ((i * (options.random_planners + 1) + j) as u64).wrapping_mul(0x9E37_79B9);
-                    Planner::BangBang {
-                        rng: Box::new(StdRng::seed_from_u64(seed)),
-                        input: Vec::new(),
-                        next_switch: 0.0,
-                    }
-                };
-                let (sustained, peak, left) = roll_out(system, solution, start, planner, options);
+                let planner = if j == 0 { Planner::WorstCase } else { Planner::bang_bang() };
+                let seed = options.seed ^ ((i * (options.random_planners + 1) + j) as u64).wrapping_mul(0x9E37_79B9);
+                let mut rng = StdRng::seed_from_u64(seed);
+                let (sustained, peak, left) = roll_out(system, solution, start, planner, &mut rng, options);
                 (j == 0, sustained, peak, left)
             })
         })

@@ -131,13 +131,43 @@ struct Rollouts {
     max_error: Vec<f64>,
 }
 
-/// How a rollout's planner picks its input.
+/// How a rollout's planner picks its input (also used by [`crate::rollout`]).
 #[derive(Clone)]
-enum Planner {
-    /// The maximiser of `grad . G_p u_p` from the model's gradient.
+pub(crate) enum Planner {
+    /// The maximiser of `grad . G_p u_p` from the value's gradient.
     WorstCase,
     /// A random vertex of the planner's box, switched at exponentially distributed times.
     BangBang { input: Vec<f64>, next_switch: f64 },
+}
+
+impl Planner {
+    /// A bang-bang planner that picks its first vertex at the first step.
+    pub(crate) fn bang_bang() -> Self {
+        Planner::BangBang { input: Vec::new(), next_switch: 0.0 }
+    }
+
+    /// The input at time `t` for the value gradient `grad`; a bang-bang planner switches with mean dwell
+    /// `mean_dwell`, drawing from `rng`.
+    pub(crate) fn input(
+        &mut self,
+        system: &AffineSystem,
+        params: &[f64],
+        grad: &[f64],
+        t: f64,
+        mean_dwell: f64,
+        rng: &mut StdRng,
+    ) -> Vec<f64> {
+        match self {
+            Planner::WorstCase => system.worst_planner(grad, params),
+            Planner::BangBang { input, next_switch } => {
+                if t >= *next_switch {
+                    *input = random_vertex(system, params, rng);
+                    *next_switch = t + exponential(mean_dwell, rng);
+                }
+                input.clone()
+            }
+        }
+    }
 }
 
 fn check(options: &VerifyOptions) -> Result<(), VerifyError> {
@@ -199,11 +229,11 @@ fn sample_sublevel_set(
     Ok((accepted, inside as f64 / proposed as f64))
 }
 
-pub(crate) fn random_vertex(system: &AffineSystem, params: &[f64], rng: &mut StdRng) -> Vec<f64> {
+fn random_vertex(system: &AffineSystem, params: &[f64], rng: &mut StdRng) -> Vec<f64> {
     system.planner_input_param.iter().map(|&k| if rng.random_bool(0.5) { params[k] } else { -params[k] }).collect()
 }
 
-pub(crate) fn exponential(mean: f64, rng: &mut StdRng) -> f64 {
+fn exponential(mean: f64, rng: &mut StdRng) -> f64 {
     -mean * (1.0 - rng.random::<f64>()).ln()
 }
 
@@ -247,16 +277,7 @@ fn roll_out(
         for j in 0..count {
             let grad: Vec<f64> = out.grad[j * n_state..(j + 1) * n_state].iter().map(|&g| f64::from(g)).collect();
             let u: Vec<f64> = out.control[j * n_control..(j + 1) * n_control].iter().map(|&c| f64::from(c)).collect();
-            let u_p = match &mut rollouts.planners[j] {
-                Planner::WorstCase => system.worst_planner(&grad, params),
-                Planner::BangBang { input, next_switch } => {
-                    if t >= *next_switch {
-                        *input = random_vertex(system, params, rng);
-                        *next_switch = t + exponential(options.mean_dwell, rng);
-                    }
-                    input.clone()
-                }
-            };
+            let u_p = rollouts.planners[j].input(system, params, &grad, t, options.mean_dwell, rng);
             let d = system.worst_disturbance(&grad);
             let r = &mut rollouts.states[j * n_state..(j + 1) * n_state];
             rk4(system, r, (&u, &u_p, &d), options.step);
