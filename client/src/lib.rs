@@ -11,8 +11,6 @@
 
 pub use fastrack_proto::v1 as pb;
 
-pub mod load;
-
 use pb::model_admin_service_client::ModelAdminServiceClient;
 use pb::model_service_client::ModelServiceClient;
 use pb::safety_service_client::SafetyServiceClient;
@@ -143,17 +141,6 @@ pub enum ClientError {
         /// Which setting: "CA certificate", "client certificate", "client key" or "configuration".
         what: &'static str,
         /// What is wrong with it.
-        reason: String,
-    },
-    /// A load run cannot start: bad spec, or a model description it cannot draw inputs from.
-    #[error("load run: {0}")]
-    InvalidLoad(String),
-    /// The in-process evaluation of a bundle failed (bundle, ONNX Runtime library or inference).
-    #[error("in-process evaluation of {}: {reason}", bundle.display())]
-    InProcess {
-        /// The bundle's version folder.
-        bundle: std::path::PathBuf,
-        /// What went wrong.
         reason: String,
     },
     /// The bearer token cannot be sent as gRPC metadata.
@@ -360,14 +347,14 @@ impl FastrackClient {
     }
 
     /// Opens a `Track` stream (no deadline: it lives as long as the robot runs).
-    pub async fn track(&self, model: pb::ModelRef, idle_timeout_s: f64) -> Result<TrackSession, ClientError> {
+    pub async fn track(&self, model: pb::ModelRef, idle_timeout_s: f64) -> Result<TrackStream, ClientError> {
         let (tx, rx) = tokio::sync::mpsc::channel(64);
         let open = pb::TrackRequest {
             msg: Some(pb::track_request::Msg::Open(pb::TrackOpen { model: Some(model), idle_timeout_s })),
         };
         tx.send(open).await.map_err(|_| tonic::Status::internal("stream closed"))?;
         let replies = self.safety().track(self.authorized(ReceiverStream::new(rx))).await?.into_inner();
-        Ok(TrackSession { ticks: tx, replies })
+        Ok(TrackStream { ticks: tx, replies })
     }
 
     fn admin(&self) -> ModelAdminServiceClient<Channel> {
@@ -394,12 +381,12 @@ impl FastrackClient {
 }
 
 /// An open `Track` stream: send ticks, read replies in order.
-pub struct TrackSession {
+pub struct TrackStream {
     ticks: tokio::sync::mpsc::Sender<pb::TrackRequest>,
     replies: tonic::Streaming<pb::TrackResponse>,
 }
 
-impl TrackSession {
+impl TrackStream {
     /// Sends one tick without waiting for its reply.
     pub async fn send(&self, tick: pb::TrackTick) -> Result<(), ClientError> {
         let request = pb::TrackRequest { msg: Some(pb::track_request::Msg::Tick(tick)) };

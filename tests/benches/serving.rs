@@ -1,4 +1,4 @@
-//! Serving benchmark: the load generator (`fastrack_client::load`) against the real release server on the
+//! Serving benchmark: the load generator (`fastrack_cli::load_generator`) against the real release server on the
 //! shipped model `models/untrained-dubins4d/1`, once with dynamic batching and once without, at concurrency
 //! 1, 8, 64 and 256 for unary `TrackingControl` batch 1 and batch 64 and for `Track` ticks; beside it the
 //! in-process ceiling (the same bundle through ONNX Runtime in this process, one thread per core) at batch 1
@@ -7,7 +7,9 @@
 //! Run: `bash scripts/bench.sh` (builds the release binaries first; this bench does not build the server).
 
 use anyhow::Context;
-use fastrack_client::load::{run_in_process, run_load, InProcessReport, InProcessSpec, LoadReport, LoadSpec, Workload};
+use fastrack_cli::load_generator::{
+    run_in_process, run_load, InProcessReport, InProcessSpec, LoadReport, LoadSpec, Workload,
+};
 use fastrack_client::{model_ref, ClientOptions};
 use fastrack_e2e::TestServer;
 use fastrack_valuefn::record::{write_record, Table};
@@ -105,7 +107,7 @@ fn main() -> anyhow::Result<()> {
     let mut cells = rt.block_on(measure_server(repo.path(), true))?;
     cells.extend(rt.block_on(measure_server(repo.path(), false))?);
 
-    // The ceiling, with no server running: one thread (and session) per core.
+    // The ceiling, with no server running: one thread (and ONNX Runtime session) per core.
     let threads = std::thread::available_parallelism().map_or(1, |n| n.get());
     let mut ceilings: Vec<InProcessReport> = Vec::new();
     for batch in [1, 64] {
@@ -176,7 +178,7 @@ fn main() -> anyhow::Result<()> {
         json!({
             "model": format!("models/{MODEL}/1 (SIREN, dubins4d: 4 states, 2 params; untrained)"),
             "server": "target/release/fastrack-server, defaults except --dynamic-batching true|false",
-            "client": "fastrack_client::load: closed loop, one outstanding request or tick per client, \
+            "client": "fastrack_cli::load_generator: closed loop, one outstanding request or tick per client, \
                        min(concurrency, 64) connections, in-domain random inputs; client and server on one machine",
             "concurrency": CONCURRENCY, "workloads": WORKLOADS.iter().map(ToString::to_string).collect::<Vec<_>>(),
             "duration_s": DURATION.as_secs_f64(), "warmup_s": WARMUP.as_secs_f64(), "seed": SEED,

@@ -201,7 +201,7 @@ async fn bad_requests_get_their_status_and_a_precise_message() {
     // Track: the first message must open the stream; an unknown model ends it with NOT_FOUND.
     match client.track(model_ref("nope", 0), 1.0).await {
         Err(e) => assert_eq!(e.code(), Some(Code::NotFound)),
-        Ok(mut session) => expect_error(session.recv().await, Code::NotFound, &["nope"]),
+        Ok(mut stream) => expect_error(stream.recv().await, Code::NotFound, &["nope"]),
     }
 
     assert!(server.is_running(), "the server survived every bad request");

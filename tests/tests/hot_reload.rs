@@ -58,10 +58,10 @@ async fn versions_are_swapped_under_load_without_a_failed_call() {
         tasks.push(tokio::spawn(async move {
             if worker < 10 {
                 // Ten robots on Track streams (each keeps the version it opened on).
-                let mut session = client.track(model_ref("dubins-test", 0), 0.0).await.unwrap();
+                let mut stream = client.track(model_ref("dubins-test", 0), 0.0).await.unwrap();
                 let mut seq = 0;
                 while !stop.load(Ordering::Relaxed) {
-                    let ok = matches!(session.tick(robot_tick(seq, worker)).await, Ok(r) if r.error.is_none());
+                    let ok = matches!(stream.tick(robot_tick(seq, worker)).await, Ok(r) if r.error.is_none());
                     tally.calls.fetch_add(1, Ordering::Relaxed);
                     tally.failures.fetch_add(u64::from(!ok), Ordering::Relaxed);
                     seq += 1;

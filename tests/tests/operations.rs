@@ -80,15 +80,15 @@ async fn sigterm_drains_open_streams_and_exits_zero() {
     let repo = tempfile::tempdir().unwrap();
     write_test_bundle(repo.path(), &dubins4d::system(), "dubins-test", 1, 1);
     let (mut server, client) = TestServer::start_observed(repo.path(), &["--shutdown-grace-s", "5"]).await;
-    let mut session = client.track(model_ref("dubins-test", 0), 0.0).await.unwrap();
-    assert!(session.tick(robot_tick(0, 0)).await.unwrap().error.is_none());
+    let mut stream = client.track(model_ref("dubins-test", 0), 0.0).await.unwrap();
+    assert!(stream.tick(robot_tick(0, 0)).await.unwrap().error.is_none());
     let start = Instant::now();
     let status = tokio::task::spawn_blocking(move || {
         let status = server.terminate();
         (status, server)
     });
     // The open stream is told to go elsewhere rather than cut.
-    let ended = tokio::time::timeout(Duration::from_secs(5), session.recv()).await.expect("stream ends in time");
+    let ended = tokio::time::timeout(Duration::from_secs(5), stream.recv()).await.expect("stream ends in time");
     match ended {
         Err(e) => {
             assert_eq!(e.code(), Some(tonic::Code::Unavailable), "{e}");

@@ -51,8 +51,8 @@ async fn tokens_authenticate_users_and_authorise_admins() {
 
     // A user token answers safety queries but not admin calls.
     user.query_planner_control(model_ref("dubins-test", 0), Some(2.0)).await.unwrap();
-    let mut session = user.track(model_ref("dubins-test", 0), 0.0).await.unwrap();
-    assert!(session.tick(fastrack_e2e::robot_tick(0, 0)).await.unwrap().error.is_none());
+    let mut stream = user.track(model_ref("dubins-test", 0), 0.0).await.unwrap();
+    assert!(stream.tick(fastrack_e2e::robot_tick(0, 0)).await.unwrap().error.is_none());
     let e = user.reload_model("dubins-test").await.unwrap_err();
     assert_eq!(e.code(), Some(tonic::Code::PermissionDenied), "{e}");
     assert!(e.to_string().contains("admin token"), "{e}");

@@ -24,7 +24,7 @@ async fn ten_thousand_ticks_are_answered_in_order() {
     let repo = tempfile::tempdir().unwrap();
     write_test_bundle(repo.path(), &dubins4d::system(), "dubins-test", 1, 4);
     let (server, client) = TestServer::start_observed(repo.path(), &[]).await;
-    let mut session = client.track(model_ref("dubins-test", 0), 0.0).await.unwrap();
+    let mut stream = client.track(model_ref("dubins-test", 0), 0.0).await.unwrap();
     const TICKS: u64 = 10_000;
     let (tx, mut rx) = tokio::sync::mpsc::channel::<pb::TrackTick>(128);
     let sender = tokio::spawn(async move {
@@ -37,10 +37,10 @@ async fn ten_thousand_ticks_are_answered_in_order() {
     let mut previous_beta = None;
     for expected in 0..TICKS {
         while sent < TICKS && sent < expected + 32 {
-            session.send(rx.recv().await.unwrap()).await.unwrap();
+            stream.send(rx.recv().await.unwrap()).await.unwrap();
             sent += 1;
         }
-        let reply = session.recv().await.unwrap().expect("a reply for every tick");
+        let reply = stream.recv().await.unwrap().expect("a reply for every tick");
         assert_eq!(reply.seq, expected, "replies out of order");
         assert!(reply.error.is_none(), "tick {expected}: {:?}", reply.error);
         assert!(reply.value.is_finite() && reply.control.iter().all(|u| u.is_finite()));
@@ -52,7 +52,7 @@ async fn ten_thousand_ticks_are_answered_in_order() {
     sender.await.unwrap();
     let answered = server.metric(r#"fastrack_track_ticks_total{rpc="Track",model="dubins-test",code="OK"}"#).await;
     assert_eq!(answered, TICKS as f64);
-    drop(session);
+    drop(stream);
     assert_eq!(wait_for_metric(&server, "fastrack_active_streams", 0.0).await, 0.0);
 }
 
@@ -68,18 +68,18 @@ async fn five_hundred_concurrent_streams_get_every_tick() {
     for _ in 0..10 {
         clients.push(server.client().await);
     }
-    let mut sessions = Vec::new();
+    let mut streams = Vec::new();
     for robot in 0..STREAMS {
-        sessions.push(clients[robot as usize % 10].track(model_ref("dubins-test", 0), 30.0).await.unwrap());
+        streams.push(clients[robot as usize % 10].track(model_ref("dubins-test", 0), 30.0).await.unwrap());
     }
     assert_eq!(server.metric("fastrack_active_streams").await, STREAMS as f64, "every stream open at once");
-    let tasks: Vec<_> = sessions
+    let tasks: Vec<_> = streams
         .into_iter()
         .enumerate()
-        .map(|(robot, mut session)| {
+        .map(|(robot, mut stream)| {
             tokio::spawn(async move {
                 for seq in 0..TICKS {
-                    let reply = session.tick(tick(seq, robot as u64)).await.expect("tick answered");
+                    let reply = stream.tick(tick(seq, robot as u64)).await.expect("tick answered");
                     assert_eq!(reply.seq, seq);
                     assert!(reply.error.is_none(), "robot {robot} tick {seq}: {:?}", reply.error);
                 }
@@ -110,8 +110,8 @@ async fn a_vanished_client_frees_its_stream() {
     assert_eq!(wait_for_metric(&server, "fastrack_active_streams", 0.0).await, 0.0, "streams freed after the kill");
     // The server still serves new streams.
     let client = server.client().await;
-    let mut session = client.track(model_ref("dubins-test", 0), 0.0).await.unwrap();
-    assert!(session.tick(tick(0, 0)).await.unwrap().error.is_none());
+    let mut stream = client.track(model_ref("dubins-test", 0), 0.0).await.unwrap();
+    assert!(stream.tick(tick(0, 0)).await.unwrap().error.is_none());
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -16,10 +16,10 @@ async fn main() -> anyhow::Result<()> {
     let client = FastrackClient::connect(endpoint, ClientOptions::default()).await?;
     let mut tasks = Vec::new();
     for robot in 0..streams {
-        let mut session = client.track(model_ref(model, 0), 0.0).await?;
+        let mut stream = client.track(model_ref(model, 0), 0.0).await?;
         tasks.push(tokio::spawn(async move {
             for seq in 0.. {
-                session.tick(robot_tick(seq, robot)).await?;
+                stream.tick(robot_tick(seq, robot)).await?;
                 tokio::time::sleep(Duration::from_millis(20)).await;
             }
             Ok::<(), fastrack_client::ClientError>(())

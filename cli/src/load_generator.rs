@@ -7,8 +7,8 @@
 //! range, taken from `GetModel`. Errors are counted by gRPC code and never end a run.
 //!
 //! ```no_run
-//! # async fn demo() -> Result<(), fastrack_client::ClientError> {
-//! use fastrack_client::load::{run_load, LoadSpec, Workload};
+//! # async fn demo() -> Result<(), fastrack_cli::load_generator::LoadError> {
+//! use fastrack_cli::load_generator::{run_load, LoadSpec, Workload};
 //! use fastrack_client::{model_ref, ClientOptions};
 //! use std::time::Duration;
 //! let spec = LoadSpec {
@@ -24,7 +24,7 @@
 //! # Ok(()) }
 //! ```
 
-use crate::{pb, ClientError, ClientOptions, FastrackClient};
+use fastrack_client::{pb, ClientError, ClientOptions, FastrackClient};
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
 use indicatif::ProgressBar;
@@ -36,6 +36,25 @@ use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
+
+/// Why a load run or the in-process ceiling cannot run.
+#[derive(Debug, thiserror::Error)]
+pub enum LoadError {
+    /// Connecting to the server or describing the model failed.
+    #[error(transparent)]
+    Client(#[from] ClientError),
+    /// A bad spec, or a model description the run cannot draw inputs from.
+    #[error("load run: {0}")]
+    InvalidLoad(String),
+    /// The in-process evaluation of a bundle failed (bundle, ONNX Runtime library or inference).
+    #[error("in-process evaluation of {}: {reason}", bundle.display())]
+    InProcess {
+        /// The bundle's version folder.
+        bundle: PathBuf,
+        /// What went wrong.
+        reason: String,
+    },
+}
 
 /// Most connections a run opens; more concurrent clients share them round-robin.
 pub const MAX_CONNECTIONS: usize = 64;
@@ -213,12 +232,12 @@ impl InputDomain {
         state: impl IntoIterator<Item = (f64, f64, bool)>,
         params: impl IntoIterator<Item = (f64, f64)>,
         what: &str,
-    ) -> Result<Self, ClientError> {
+    ) -> Result<Self, LoadError> {
         let check = |kind: &str, i: usize, (lo, hi): (f64, f64)| {
             if lo.is_finite() && hi.is_finite() && lo <= hi {
                 Ok((lo, hi))
             } else {
-                Err(ClientError::InvalidLoad(format!("{what}: {kind}[{i}] has no finite interval ([{lo}, {hi}])")))
+                Err(LoadError::InvalidLoad(format!("{what}: {kind}[{i}] has no finite interval ([{lo}, {hi}])")))
             }
         };
         let state = state
@@ -229,18 +248,18 @@ impl InputDomain {
                 let margin = if periodic { 0.0 } else { DOMAIN_MARGIN * (hi - lo) };
                 Ok((lo + margin, hi - margin))
             })
-            .collect::<Result<Vec<_>, ClientError>>()?;
+            .collect::<Result<Vec<_>, LoadError>>()?;
         let params =
             params.into_iter().enumerate().map(|(i, range)| check("params", i, range)).collect::<Result<_, _>>()?;
         if state.is_empty() {
-            return Err(ClientError::InvalidLoad(format!("{what}: the model has no state coordinates")));
+            return Err(LoadError::InvalidLoad(format!("{what}: the model has no state coordinates")));
         }
         Ok(Self { state, params })
     }
 
-    fn from_model(info: &pb::ModelInfo) -> Result<Self, ClientError> {
+    fn from_model(info: &pb::ModelInfo) -> Result<Self, LoadError> {
         let what = format!("model {}/{}", info.name, info.version);
-        let missing = |kind: &str, i: usize| ClientError::InvalidLoad(format!("{what}: {kind}[{i}] has no bounds"));
+        let missing = |kind: &str, i: usize| LoadError::InvalidLoad(format!("{what}: {kind}[{i}] has no bounds"));
         let state = info
             .state
             .iter()
@@ -291,10 +310,10 @@ struct TickSampler {
 }
 
 impl TickSampler {
-    fn from_model(info: &pb::ModelInfo, domain: InputDomain) -> Result<Self, ClientError> {
+    fn from_model(info: &pb::ModelInfo, domain: InputDomain) -> Result<Self, LoadError> {
         let planner_dim = info.planner_dim as usize;
         if info.planner_to_state.len() != domain.state.len() * planner_dim {
-            return Err(ClientError::InvalidLoad(format!(
+            return Err(LoadError::InvalidLoad(format!(
                 "model {}/{}: planner_to_state holds {} numbers, expected {} x {planner_dim}",
                 info.name,
                 info.version,
@@ -414,15 +433,15 @@ async fn track_client(
 ) -> ClientStats {
     let mut stats = ClientStats::default();
     let mut rng = StdRng::seed_from_u64(seed);
-    let mut session = None;
+    let mut open_stream = None;
     let mut seq = 0u64;
     while Instant::now() < window.end {
-        let stream = match &mut session {
+        let stream = match &mut open_stream {
             Some(stream) => stream,
             None => {
                 let started = Instant::now();
                 match client.track(model.clone(), 0.0).await {
-                    Ok(opened) => session.insert(opened),
+                    Ok(opened) => open_stream.insert(opened),
                     Err(e) => {
                         counters.count(false);
                         stats.record(started, window.measure_from, Err(code_of(&e)));
@@ -442,7 +461,7 @@ async fn track_client(
             },
             Err(e) => {
                 // The stream is gone: reopen it on the next round.
-                session = None;
+                open_stream = None;
                 Err(code_of(&e))
             }
         };
@@ -480,12 +499,12 @@ pub async fn run_load(
     options: &ClientOptions,
     spec: &LoadSpec,
     progress: Option<ProgressBar>,
-) -> Result<LoadReport, ClientError> {
+) -> Result<LoadReport, LoadError> {
     if spec.concurrency == 0 {
-        return Err(ClientError::InvalidLoad("concurrency must be at least 1".into()));
+        return Err(LoadError::InvalidLoad("concurrency must be at least 1".into()));
     }
     if spec.workload.items_per_request() == 0 {
-        return Err(ClientError::InvalidLoad("batch must be at least 1".into()));
+        return Err(LoadError::InvalidLoad("batch must be at least 1".into()));
     }
     let connections = spec.concurrency.min(MAX_CONNECTIONS);
     let mut clients = Vec::with_capacity(connections);
@@ -525,7 +544,7 @@ pub async fn run_load(
     let mut last_finish = measure_from;
     while let Some(joined) = tasks.join_next().await {
         // A client task only ends by returning; a panic in one would be a bug worth surfacing.
-        let stats = joined.map_err(|e| ClientError::InvalidLoad(format!("a load client failed: {e}")))?;
+        let stats = joined.map_err(|e| LoadError::InvalidLoad(format!("a load client failed: {e}")))?;
         latencies.extend(stats.latencies);
         for (code, n) in stats.errors {
             *errors.entry(code).or_default() += n;
@@ -577,7 +596,7 @@ pub struct InProcessSpec {
 pub struct InProcessReport {
     /// Items per evaluation.
     pub batch: usize,
-    /// Threads (and sessions).
+    /// Threads (and ONNX Runtime sessions).
     pub threads: usize,
     /// Evaluations started after the warm-up.
     pub evaluations: u64,
@@ -609,8 +628,8 @@ impl InProcessReport {
 /// Evaluates the bundle at `spec.bundle_dir` on `spec.threads` threads, `spec.batch` random in-domain items
 /// per call, for the warm-up and then the measured time. Blocks the calling thread: from async code, call
 /// it through `tokio::task::spawn_blocking`.
-pub fn run_in_process(spec: &InProcessSpec) -> Result<InProcessReport, ClientError> {
-    let fail = |reason: String| ClientError::InProcess { bundle: spec.bundle_dir.clone(), reason };
+pub fn run_in_process(spec: &InProcessSpec) -> Result<InProcessReport, LoadError> {
+    let fail = |reason: String| LoadError::InProcess { bundle: spec.bundle_dir.clone(), reason };
     if spec.batch == 0 || spec.threads == 0 {
         return Err(fail("batch and threads must be at least 1".into()));
     }
@@ -621,7 +640,7 @@ pub fn run_in_process(spec: &InProcessSpec) -> Result<InProcessReport, ClientErr
         m.params.iter().map(|p| (p.min, p.max)),
         &format!("bundle {}", spec.bundle_dir.display()),
     )?;
-    let dims = GraphDims { n_state: m.n_state(), n_params: m.n_params(), n_control: m.n_control() };
+    let dims = GraphDims::of(m);
     let rt = runtime(spec.ort_lib.as_deref()).map_err(|e| fail(e.to_string()))?;
     let evaluator = Evaluator::new(rt, &bundle.onnx, dims, spec.threads).map_err(|e| fail(e.to_string()))?;
     let start = Instant::now();
@@ -735,14 +754,14 @@ mod tests {
     fn unusable_model_descriptions_are_errors() {
         let mut bad = info();
         bad.params[0].range = Some(pb::Interval { min: 2.0, max: 1.0 });
-        assert!(matches!(InputDomain::from_model(&bad), Err(ClientError::InvalidLoad(_))));
+        assert!(matches!(InputDomain::from_model(&bad), Err(LoadError::InvalidLoad(_))));
         bad = info();
         bad.state[0].bounds = None;
-        assert!(matches!(InputDomain::from_model(&bad), Err(ClientError::InvalidLoad(_))));
+        assert!(matches!(InputDomain::from_model(&bad), Err(LoadError::InvalidLoad(_))));
         bad = info();
         bad.planner_to_state.pop();
         let domain = InputDomain::from_model(&bad).unwrap();
-        assert!(matches!(TickSampler::from_model(&bad, domain), Err(ClientError::InvalidLoad(_))));
+        assert!(matches!(TickSampler::from_model(&bad, domain), Err(LoadError::InvalidLoad(_))));
     }
 
     #[test]

@@ -1,0 +1,98 @@
+//! `fastrack models` and `fastrack model`: what the server has loaded, and one model's description.
+
+use super::print;
+use fastrack_client::{model_ref, pb, FastrackClient};
+use serde_json::{json, Value};
+
+/// Arguments of `fastrack model`.
+#[derive(clap::Args)]
+pub struct ModelArgs {
+    /// Model name.
+    name: String,
+    /// Version (0 = the default: the pinned version, else the latest).
+    #[arg(long, default_value_t = 0)]
+    version: u32,
+}
+
+/// Lists the loaded model versions (`*` marks each model's default version).
+pub async fn models(client: &FastrackClient, json_mode: bool) -> anyhow::Result<()> {
+    let models = client.list_models().await?;
+    print(json_mode, Value::Array(models.iter().map(model_json).collect()), || {
+        models
+            .iter()
+            .map(|m| {
+                format!(
+                    "{}/{}{}  {}{}",
+                    m.name,
+                    m.version,
+                    if m.is_default_version { "*" } else { " " },
+                    m.system,
+                    if m.untrained { "  UNTRAINED" } else { "" }
+                )
+            })
+            .collect::<Vec<_>>()
+            .join("\n")
+    });
+    Ok(())
+}
+
+/// Describes one model version: domain, parameters, controls, TEB table.
+pub async fn model(client: &FastrackClient, args: ModelArgs, json_mode: bool) -> anyhow::Result<()> {
+    let m = client.get_model(model_ref(&args.name, args.version)).await?;
+    print(json_mode, model_json(&m), || model_text(&m));
+    Ok(())
+}
+
+fn model_json(m: &pb::ModelInfo) -> Value {
+    json!({
+        "name": m.name, "version": m.version, "system": m.system, "description": m.description,
+        "untrained": m.untrained, "default_version": m.is_default_version, "horizon": m.horizon,
+        "state": m.state.iter().map(|d| json!({"name": d.name, "unit": d.unit,
+            "min": d.bounds.map(|b| b.min), "max": d.bounds.map(|b| b.max), "periodic": d.periodic,
+            "error_coordinate": d.error_coordinate,
+            "limits": d.limits.map(|l| [l.min, l.max])})).collect::<Vec<_>>(),
+        "params": m.params.iter().map(|p| json!({"name": p.name, "unit": p.unit,
+            "min": p.range.map(|r| r.min), "max": p.range.map(|r| r.max)})).collect::<Vec<_>>(),
+        "controls": m.controls.iter().map(|c| json!({"name": c.name, "unit": c.unit,
+            "min": c.bounds.map(|b| b.min), "max": c.bounds.map(|b| b.max)})).collect::<Vec<_>>(),
+        "teb_table": m.teb_table.iter().map(|r| json!({"beta": r.beta, "level": r.level,
+            "learned_level": r.learned_level, "verified_level": r.verified_level, "extent": r.extent})).collect::<Vec<_>>(),
+        "onnx_sha256": m.onnx_sha256,
+    })
+}
+
+fn model_text(m: &pb::ModelInfo) -> String {
+    let mut out = format!(
+        "{}/{}{} — system {}{}\n  {}\n  horizon {} s\n  state:",
+        m.name,
+        m.version,
+        if m.is_default_version { " (default)" } else { "" },
+        m.system,
+        if m.untrained { " — UNTRAINED (random weights, bounds meaningless)" } else { "" },
+        m.description,
+        m.horizon
+    );
+    for d in &m.state {
+        let b = d.bounds.unwrap_or_default();
+        out += &format!(
+            "\n    {:<8} [{}, {}] {}{}{}",
+            d.name,
+            b.min,
+            b.max,
+            d.unit,
+            if d.periodic { " periodic" } else { "" },
+            d.limits.map_or(String::new(), |l| format!(", control held within [{}, {}]", l.min, l.max))
+        );
+    }
+    out += "\n  params:";
+    for p in &m.params {
+        let r = p.range.unwrap_or_default();
+        out += &format!("\n    {:<8} [{}, {}] {}", p.name, r.min, r.max, p.unit);
+    }
+    out += "\n  TEB table:\n    beta      level    learned  verified";
+    for r in &m.teb_table {
+        let verified = r.verified_level.map_or("-".to_string(), |v| format!("{v:.4}"));
+        out += &format!("\n    {:<8.4}  {:<7.4}  {:<7.4}  {verified}", r.beta, r.level, r.learned_level);
+    }
+    out
+}
