@@ -1,23 +1,24 @@
 //! Grid Hamilton-Jacobi level-set solver for fastrack's tracking value functions: numerical ground truth
 //! for learned models.
 //!
-//! The module split follows hj_reachability: [`grid`] (axes, indexing, interpolation), [`upwind`] (finite
+//! The module split follows hj_reachability: [`grid`] (axes, indexing, interpolation; with [`format`], the
+//! `.ftgrid` file, from the `fastrack-gridfile` crate), [`upwind`] (finite
 //! differences: first order, ENO2, WENO5, boundary conditions), [`hamiltonian`] (the system's Hamiltonian
 //! and Lax-Friedrichs dissipation), [`scheme`] (the parallel semi-discrete right-hand side), [`integrate`]
 //! (TVD Runge-Kutta), [`solver`] (the tracking value iteration to convergence). Around it: [`analysis`]
-//! (TEB of a solution), [`format`] (the `.ftgrid` file), [`compare`] (a model bundle against grid solutions),
+//! (TEB of a solution), [`compare`] (a model bundle against grid solutions),
 //! [`verify`] (scenario verification of a bundle's TEB table), [`rollout`] (what planners force against a grid
-//! solution's own policy), [`plot`] (PNG figures).
+//! solution's own policy), [`slice_plot`] (PNG figures).
 
 pub mod analysis;
 pub mod compare;
-pub mod format;
-pub mod grid;
 pub mod hamiltonian;
 pub mod integrate;
-pub mod plot;
 pub mod rollout;
 pub mod scheme;
+pub mod slice_plot;
 pub mod solver;
 pub mod upwind;
 pub mod verify;
+
+pub use fastrack_gridfile::{format, grid};

@@ -4,55 +4,8 @@
 use crate::grid::Grid;
 use crate::hamiltonian::{Hamiltonian, MAX_STATE};
 use crate::upwind::{gather_rows, one_sided_rows, Accuracy, Row};
+pub use fastrack_gridfile::settings::{Flux, UnknownFlux};
 use rayon::prelude::*;
-use serde::{Deserialize, Serialize};
-use std::fmt;
-use std::str::FromStr;
-
-/// The numerical Hamiltonian (flux) built from the one-sided derivatives.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Default, Serialize, Deserialize)]
-#[serde(rename_all = "snake_case")]
-pub enum Flux {
-    /// Lax-Friedrichs with per-point dissipation from the `|dH/dp_i|` bounds: any system.
-    #[default]
-    LaxFriedrichs,
-    /// Godunov's: systems whose every input acts on one state coordinate. The least dissipative monotone
-    /// flux: closer to the double integrator's closed form than Lax-Friedrichs, but lower (the unsafe side)
-    /// where a valley of `V` is only a few cells wide (grid README).
-    Godunov,
-}
-
-impl Flux {
-    /// Every flux.
-    pub const ALL: [Flux; 2] = [Flux::LaxFriedrichs, Flux::Godunov];
-
-    /// The name used on the command line and in files.
-    pub fn name(self) -> &'static str {
-        match self {
-            Flux::LaxFriedrichs => "lax_friedrichs",
-            Flux::Godunov => "godunov",
-        }
-    }
-}
-
-impl fmt::Display for Flux {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-/// A flux name that is not `lax_friedrichs` or `godunov`.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("unknown flux `{0}`; expected lax_friedrichs or godunov")]
-pub struct UnknownFlux(pub String);
-
-impl FromStr for Flux {
-    type Err = UnknownFlux;
-
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        Flux::ALL.into_iter().find(|f| f.name() == s).ok_or_else(|| UnknownFlux(s.into()))
-    }
-}
 
 /// Everything the right-hand side needs besides the values.
 pub struct Scheme<'a> {

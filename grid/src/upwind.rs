@@ -2,63 +2,7 @@
 //! (first order, ENO2, WENO5), and the stencil gather with the boundary conditions (periodic wrap, or
 //! linear extrapolation away from zero beyond a non-periodic edge).
 
-use serde::{Deserialize, Serialize};
-use std::fmt;
-use std::str::FromStr;
-
-/// Spatial accuracy of the one-sided derivative approximations.
-#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
-#[serde(rename_all = "lowercase")]
-pub enum Accuracy {
-    /// First-order upwind differences (stencil half-width 1).
-    First,
-    /// Second-order essentially non-oscillatory (half-width 2).
-    Eno2,
-    /// Fifth-order weighted ENO of Jiang and Peng (half-width 3).
-    Weno5,
-}
-
-impl Accuracy {
-    /// Every accuracy, coarsest first.
-    pub const ALL: [Accuracy; 3] = [Accuracy::First, Accuracy::Eno2, Accuracy::Weno5];
-
-    /// Nodes on each side of the centre a derivative reads.
-    pub fn half_width(self) -> usize {
-        match self {
-            Accuracy::First => 1,
-            Accuracy::Eno2 => 2,
-            Accuracy::Weno5 => 3,
-        }
-    }
-
-    /// The name used on the command line and in files.
-    pub fn name(self) -> &'static str {
-        match self {
-            Accuracy::First => "first",
-            Accuracy::Eno2 => "eno2",
-            Accuracy::Weno5 => "weno5",
-        }
-    }
-}
-
-impl fmt::Display for Accuracy {
-    fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
-        f.write_str(self.name())
-    }
-}
-
-/// An accuracy name that is not `first`, `eno2` or `weno5`.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("unknown accuracy `{0}`; expected first, eno2 or weno5")]
-pub struct UnknownAccuracy(pub String);
-
-impl FromStr for Accuracy {
-    type Err = UnknownAccuracy;
-
-    fn from_str(s: &str) -> Result<Self, Self::Err> {
-        Accuracy::ALL.into_iter().find(|a| a.name() == s).ok_or_else(|| UnknownAccuracy(s.into()))
-    }
-}
+pub use fastrack_gridfile::settings::{Accuracy, UnknownAccuracy};
 
 /// Values at nodes `i - 3 ..= i + 3` of one axis (index 3 is the centre); only the accuracy's half-width
 /// around the centre is read.

@@ -9,8 +9,8 @@
 
 use crate::config::SupervisionConfig;
 use burn::tensor::{Device, Tensor, TensorData};
-use fastrack_grid::format::{load, FormatError};
-use fastrack_grid::solver::Solution;
+use fastrack_gridfile::format::{load, FormatError};
+use fastrack_gridfile::solution::Solution;
 use fastrack_valuefn::system::AffineSystem;
 use rand::{Rng, SeedableRng};
 use std::path::PathBuf;

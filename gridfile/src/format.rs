@@ -11,7 +11,7 @@
 //! `min + i (max - min) / n`.
 
 use crate::grid::{Axis, Grid, GridError};
-use crate::solver::{Solution, SolveInfo};
+use crate::solution::{Solution, SolveInfo};
 use serde::{Deserialize, Serialize};
 use std::io::{Read, Write};
 use std::path::{Path, PathBuf};

@@ -1,0 +1,12 @@
+//! Grid value functions as files: what the grid solver writes and what the trainer and the comparison
+//! tools read, without the solver itself.
+//!
+//! - [`grid`]: axes, row-major indexing and multilinear interpolation.
+//! - [`settings`]: the scheme and convergence settings a solution records.
+//! - [`solution`]: a value function on a grid with the record of how it was solved.
+//! - [`format`]: the `.ftgrid` file.
+
+pub mod format;
+pub mod grid;
+pub mod settings;
+pub mod solution;
