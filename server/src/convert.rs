@@ -2,9 +2,11 @@
 
 use fastrack_proto::v1 as pb;
 use fastrack_valuefn::manifest::Manifest;
+use fastrack_valuefn::system::StateSpace;
 
-/// The `ModelInfo` describing a manifest (`is_default_version` is filled in by the repository).
-pub fn model_info(m: &Manifest) -> pb::ModelInfo {
+/// The `ModelInfo` describing a manifest and the state space built from it (`is_default_version` is filled
+/// in by the repository).
+pub fn model_info(m: &Manifest, space: &StateSpace) -> pb::ModelInfo {
     let interval = |min: f64, max: f64| Some(pb::Interval { min, max });
     pb::ModelInfo {
         name: m.name.clone(),
@@ -42,7 +44,7 @@ pub fn model_info(m: &Manifest) -> pb::ModelInfo {
             })
             .collect(),
         planner_to_state: m.planner_to_state.iter().flatten().copied().collect(),
-        planner_dim: m.planner_dim() as u32,
+        planner_dim: space.planner_dim() as u32,
         horizon: m.horizon,
         teb_table: m
             .teb_table

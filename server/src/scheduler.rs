@@ -4,9 +4,9 @@
 //! splits the answer. A full queue refuses new work with `RESOURCE_EXHAUSTED`; work whose caller left or
 //! whose deadline passed is dropped unevaluated.
 
-use crate::config::ComputeSettings;
+use crate::loaded_model::LoadedModel;
 use crate::metrics::Metrics;
-use crate::model::LoadedModel;
+use crate::settings::ComputeSettings;
 use crate::validate::ValidBatch;
 use fastrack_valuefn::runtime::Evaluation;
 use std::collections::VecDeque;
@@ -216,7 +216,7 @@ impl Shared {
 
 /// Cuts a merged evaluation back into one per job, in order.
 fn split(merged: Evaluation, group: &[Job], model: &LoadedModel) -> Vec<Evaluation> {
-    let (ns, nc) = (model.manifest.n_state(), model.manifest.n_control());
+    let (ns, nc) = (model.space.n_state(), model.manifest.n_control());
     let mut offset = 0;
     group
         .iter()

@@ -1,6 +1,6 @@
 //! Request validation: every rejection names the field, the item and what is allowed.
 
-use crate::model::LoadedModel;
+use crate::loaded_model::LoadedModel;
 use fastrack_proto::v1::OutOfDomainPolicy;
 use tonic::Status;
 
@@ -40,7 +40,7 @@ pub fn batch(
     policy: OutOfDomainPolicy,
 ) -> Result<ValidBatch, Status> {
     let m = &model.manifest;
-    let (ns, np) = (m.n_state(), m.n_params());
+    let (ns, np) = (model.space.n_state(), m.n_params());
     // Names are joined only for error messages: this runs on every request and tick.
     let state_names = || m.state.iter().map(|d| d.name.as_str()).collect::<Vec<_>>().join(", ");
     let param_names = || m.params.iter().map(|d| d.name.as_str()).collect::<Vec<_>>().join(", ");
@@ -85,9 +85,9 @@ pub fn batch(
     }
     let mut in_domain = Vec::with_capacity(n);
     for (i, item) in states.chunks(ns).enumerate() {
-        let outside =
-            item.iter().zip(&m.state).enumerate().find(|(_, (&x, d))| !d.periodic && (x < d.min || x > d.max));
-        if let Some((j, (&x, d))) = outside {
+        let outside = model.space.first_outside(item);
+        if let Some(j) = outside {
+            let (x, d) = (item[j], &m.state[j]);
             let reject = match policy {
                 OutOfDomainPolicy::Reject => true,
                 OutOfDomainPolicy::Flag => false,
@@ -139,7 +139,7 @@ pub fn beta(model: &LoadedModel, beta: f64) -> Result<f64, Status> {
 
 /// Checks the vector lengths and finiteness of one `Track` tick.
 pub fn tick(model: &LoadedModel, tracker: &[f64], planner: &[f64]) -> Result<(), Status> {
-    let (ns, npl) = (model.manifest.n_state(), model.manifest.planner_dim());
+    let (ns, npl) = (model.space.n_state(), model.space.planner_dim());
     if tracker.len() != ns {
         return Err(Status::invalid_argument(format!(
             "tracker_state has {} values; must have n_state = {ns}",

@@ -88,7 +88,7 @@ pub fn write_network_bundle(
 pub fn evaluator_for(dir: &Path) -> (Evaluator, Manifest) {
     let bundle = Bundle::load(dir).expect("bundle loads");
     let m = bundle.manifest.clone();
-    let dims = GraphDims { n_state: m.n_state(), n_params: m.n_params(), n_control: m.n_control() };
+    let dims = GraphDims::of(&m);
     let rt = runtime(None).expect("ONNX Runtime (run scripts/setup-onnxruntime.sh)");
     (Evaluator::new(rt, &bundle.onnx, dims, 1).expect("evaluator"), m)
 }

@@ -43,7 +43,7 @@ const GRADIENT_TOLERANCE: f64 = 1e-3;
 pub fn export(root: &Path, request: ExportRequest<'_>) -> anyhow::Result<PathBuf> {
     let ExportRequest { network, system, horizon, .. } = request;
     let onnx = write_value_graph(network, system, horizon);
-    let dims = GraphDims { n_state: system.n_state(), n_params: system.n_params(), n_control: system.n_control() };
+    let dims = GraphDims::of_system(system);
     let rt = runtime(None)?;
     let evaluator = Evaluator::new(rt, &onnx, dims, 1).context("loading the written graph")?;
     let report = teb_table(&evaluator, system, &request.teb).map_err(anyhow::Error::msg)?;

@@ -99,7 +99,7 @@ fn drawn_targets_blend_the_grid_values_in_beta_at_the_drawn_points() {
         let beta = f64::from(params[i]);
         assert!((0.5..=1.0).contains(&beta) && tau[i] == 0.3, "row {i}: beta {beta}, tau {}", tau[i]);
         let x = [f64::from(state[2 * i]), f64::from(state[2 * i + 1])];
-        assert!(di.in_domain(&x), "row {i}: {x:?} outside the domain");
+        assert!(di.state_space().in_domain(&x), "row {i}: {x:?} outside the domain");
         let w = (beta - 0.5) / 0.5;
         let value = |s: &Solution| s.grid.interpolate(&s.values, &x);
         let expected = (1.0 - w) * value(&low_solution) + w * value(&high_solution);

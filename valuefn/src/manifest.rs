@@ -1,7 +1,8 @@
 //! `manifest.json` of a model bundle: versioned schema, serde types and validation with precise errors.
 
 use crate::network::{PeriodicEncoding, ValueNetwork};
-use crate::system::AffineSystem;
+use crate::system::{AffineSystem, Coordinate, StateSpace};
+use nalgebra::DMatrix;
 use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 
@@ -274,11 +275,6 @@ impl Manifest {
         serde_json::to_string_pretty(self).expect("manifest serialises")
     }
 
-    /// Number of state coordinates.
-    pub fn n_state(&self) -> usize {
-        self.state.len()
-    }
-
     /// Number of parameters.
     pub fn n_params(&self) -> usize {
         self.params.len()
@@ -289,26 +285,19 @@ impl Manifest {
         self.controls.len()
     }
 
-    /// Number of planner state coordinates.
-    pub fn planner_dim(&self) -> usize {
-        self.planner_to_state.first().map_or(0, Vec::len)
-    }
-
-    /// Relative state `r = s - Q p` of tracker state `s` and planner state `p`, periodic coordinates wrapped.
-    pub fn relative_state(&self, tracker: &[f64], planner: &[f64]) -> Vec<f64> {
-        self.state
-            .iter()
-            .zip(tracker)
-            .zip(&self.planner_to_state)
-            .map(|((dim, s), q)| {
-                let x = s - q.iter().zip(planner).map(|(a, b)| a * b).sum::<f64>();
-                if dim.periodic {
-                    crate::system::wrap_periodic(x, dim.min, dim.max)
-                } else {
-                    x
-                }
-            })
-            .collect()
+    /// The relative-state space the bundle describes (domains, error coordinates, `Q`): the system a server
+    /// builds from a manifest, knowing no robot. Call it on a validated manifest.
+    pub fn state_space(&self) -> StateSpace {
+        let columns = self.planner_to_state.first().map_or(0, Vec::len);
+        StateSpace {
+            coordinates: self
+                .state
+                .iter()
+                .map(|d| Coordinate { min: d.min, max: d.max, periodic: d.periodic })
+                .collect(),
+            error_coords: self.error_coords(),
+            planner_to_state: DMatrix::from_fn(self.state.len(), columns, |i, j| self.planner_to_state[i][j]),
+        }
     }
 
     /// Indices of the error coordinates.
@@ -365,7 +354,7 @@ impl Manifest {
                 ),
             );
         }
-        let planner_dim = self.planner_dim();
+        let planner_dim = self.planner_to_state.first().map_or(0, Vec::len);
         if planner_dim == 0 {
             return fail("planner_to_state", "rows must have at least one column");
         }

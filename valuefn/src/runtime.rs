@@ -135,6 +135,18 @@ pub struct GraphDims {
     pub n_control: usize,
 }
 
+impl GraphDims {
+    /// The dimensions a bundle's manifest declares for its graph.
+    pub fn of(manifest: &crate::manifest::Manifest) -> Self {
+        Self { n_state: manifest.state.len(), n_params: manifest.n_params(), n_control: manifest.n_control() }
+    }
+
+    /// The dimensions of a graph written for `system`.
+    pub fn of_system(system: &crate::system::AffineSystem) -> Self {
+        Self { n_state: system.n_state(), n_params: system.n_params(), n_control: system.n_control() }
+    }
+}
+
 /// Outputs of one batch, row-major, f32 as the graph computes them.
 #[derive(Debug, Clone, Default, PartialEq)]
 pub struct Evaluation {

@@ -32,7 +32,7 @@ fn check_roundtrip(system: &AffineSystem, exact_boundary: bool, seed: u64) {
 fn check_network_roundtrip(system: &AffineSystem, network: &ValueNetwork, exact_boundary: bool, seed: u64) {
     let tau = 1.7;
     let onnx = write_value_graph(network, system, tau);
-    let dims = GraphDims { n_state: system.n_state(), n_params: system.n_params(), n_control: system.n_control() };
+    let dims = GraphDims::of_system(system);
     let evaluator =
         Evaluator::new(runtime(None).expect("ONNX Runtime (scripts/setup-onnxruntime.sh)"), &onnx, dims, 1).unwrap();
     let (states, params) = random_batch(system, N, seed + 1);

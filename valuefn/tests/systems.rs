@@ -1,4 +1,4 @@
-//! The generic affine-system machinery against brute force and the closed forms of DESIGN.md.
+//! The generic affine-system machinery against brute force and dubins4d's closed-form Hamiltonian.
 
 use fastrack_valuefn::system::{double_integrator, dubins4d, AffineSystem};
 use rand::{Rng, SeedableRng};
@@ -38,7 +38,7 @@ fn dubins4d_hamiltonian_and_controls_equal_brute_force_and_closed_form() {
             p[0] * r[3] * r[2].sin() + p[1] * r[3] * r[2].cos() + params[0] * p[0].abs() + params[1] * p[1].abs()
                 - 5.0 * p[2].abs()
                 - p[3].abs();
-        assert!((h - closed).abs() < 1e-12, "H {h} vs DESIGN.md closed form {closed}");
+        assert!((h - closed).abs() < 1e-12, "H {h} vs the closed form {closed}");
 
         // The optimal control attains the min over control vertices; the closed form is -5 sign(p3), -sign(p4)
         // (between the speed limits, where the whole box is allowed).
@@ -155,11 +155,13 @@ fn dissipation_bounds_dominate_hamiltonian_slopes() {
 #[test]
 fn relative_state_subtracts_planner_and_wraps_angles() {
     let system = dubins4d::system();
-    let r = system.relative_state(&[1.0, 2.0, 3.0 * std::f64::consts::PI, 1.5], &[0.25, 0.5]);
+    let space = system.state_space();
+    let r = space.relative_state(&[1.0, 2.0, 3.0 * std::f64::consts::PI, 1.5], &[0.25, 0.5]);
     assert!((r[0] - 0.75).abs() < 1e-12 && (r[1] - 1.5).abs() < 1e-12);
     assert!((r[2] - (-std::f64::consts::PI)).abs() < 1e-9, "3 pi wraps to -pi, got {}", r[2]);
     assert_eq!(r[3], 1.5);
     assert!((system.tracking_error(&r) - (0.75f64.hypot(1.5))).abs() < 1e-12);
-    assert!(system.in_domain(&r));
-    assert!(!system.in_domain(&[3.5, 0.0, 0.0, 1.0]));
+    assert!((space.tracking_error(&r) - system.tracking_error(&r)).abs() < 1e-15);
+    assert!(space.in_domain(&r));
+    assert!(!space.in_domain(&[3.5, 0.0, 0.0, 1.0]));
 }

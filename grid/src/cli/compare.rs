@@ -4,7 +4,7 @@ use super::common::{command_line, SolveOptions, StudyOutputs};
 use super::table::solve_or_load;
 use anyhow::{bail, Context};
 use fastrack_grid::compare::{compare, learned_on_grid, slices};
-use fastrack_grid::plot::slice_pair;
+use fastrack_grid::slice_plot::slice_pair;
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::record::{write_record, Table};
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
@@ -41,8 +41,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if !(args.sublevel_factor.is_finite() && args.sublevel_factor >= 1.0) {
         bail!("--sublevel-factor = {} must be at least 1", args.sublevel_factor);
     }
-    let dims =
-        GraphDims { n_state: manifest.n_state(), n_params: manifest.n_params(), n_control: manifest.n_control() };
+    let dims = GraphDims::of(manifest);
     let evaluator = Evaluator::new(runtime(args.ort_lib.as_deref())?, &bundle.onnx, dims, 1)?;
     let name = args.outputs.record.clone().unwrap_or_else(|| format!("grid-compare-{}", manifest.name));
     std::fs::create_dir_all(&args.outputs.results_dir)?;

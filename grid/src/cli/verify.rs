@@ -70,8 +70,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let system = for_bundle(&manifest.system.id, manifest.n_params()).with_context(|| {
         format!("the bundle's system `{}` with {} parameters is unknown", manifest.system.id, manifest.n_params())
     })?;
-    let dims =
-        GraphDims { n_state: manifest.n_state(), n_params: manifest.n_params(), n_control: manifest.n_control() };
+    let dims = GraphDims::of(&manifest);
     let evaluator = Evaluator::new(runtime(args.ort_lib.as_deref())?, &bundle.onnx, dims, 1)?;
     let options = VerifyOptions {
         eps: args.eps,

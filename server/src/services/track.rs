@@ -1,10 +1,10 @@
 //! The `Track` bidirectional stream: one per robot, answering every tick in order and keeping `beta_old`.
 
+use crate::loaded_model::LoadedModel;
 use crate::metrics::{code_name, Metrics};
-use crate::model::LoadedModel;
 use crate::repository::Repository;
 use crate::scheduler::Scheduler;
-use crate::teb::query_planner_control;
+use crate::teb_rules::query_planner_control;
 use crate::validate;
 use fastrack_proto::v1 as pb;
 use pb::track_request::Msg;
@@ -179,7 +179,7 @@ async fn evaluate_tick(
     validate::tick(model, &tick.tracker_state, &tick.planner_state)?;
     let d_obs = validate::d_obs(tick.d_obs)?;
     let speed = query_planner_control(&model.manifest.teb_table, d_obs);
-    let relative = model.manifest.relative_state(&tick.tracker_state, &tick.planner_state);
+    let relative = model.space.relative_state(&tick.tracker_state, &tick.planner_state);
     let params = vec![speed.beta; model.manifest.n_params()];
     let batch = validate::batch(model, &relative, &params, pb::OutOfDomainPolicy::Flag)?;
     let (result, batch) = scheduler.evaluate(model, batch, None).await?;

@@ -10,9 +10,11 @@ mod boxset;
 pub mod double_integrator;
 pub mod drift;
 pub mod dubins4d;
+mod state_space;
 
 pub use boxset::BoxSet;
 pub use drift::{Drift, DriftTerm, Factor};
+pub use state_space::{wrap_periodic, Coordinate, StateSpace};
 
 use nalgebra::DMatrix;
 
@@ -143,34 +145,28 @@ impl AffineSystem {
         shared
     }
 
+    /// The relative-state space: domains, error coordinates and `Q`.
+    pub fn state_space(&self) -> StateSpace {
+        StateSpace {
+            coordinates: self.coordinates().collect(),
+            error_coords: self.error_coords.clone(),
+            planner_to_state: self.planner_to_state.clone(),
+        }
+    }
+
+    /// The domain of each coordinate.
+    fn coordinates(&self) -> impl Iterator<Item = Coordinate> + '_ {
+        self.state.iter().map(|d| Coordinate { min: d.min, max: d.max, periodic: d.periodic })
+    }
+
     /// Tracking error `l(r)`: Euclidean norm of the error coordinates.
     pub fn tracking_error(&self, r: &[f64]) -> f64 {
-        self.error_coords.iter().map(|&i| r[i] * r[i]).sum::<f64>().sqrt()
+        state_space::error_norm(&self.error_coords, r)
     }
 
     /// Wraps periodic coordinates of `r` into their period `[min, max)`.
     pub fn wrap(&self, r: &mut [f64]) {
-        for (x, dim) in r.iter_mut().zip(&self.state) {
-            if dim.periodic {
-                *x = wrap_periodic(*x, dim.min, dim.max);
-            }
-        }
-    }
-
-    /// True if `r` (after wrapping periodic coordinates) lies within the domain.
-    pub fn in_domain(&self, r: &[f64]) -> bool {
-        r.iter().zip(&self.state).all(|(&x, d)| d.periodic || (x >= d.min && x <= d.max))
-    }
-
-    /// Relative state `r = s - Q p`, periodic coordinates wrapped.
-    pub fn relative_state(&self, tracker: &[f64], planner: &[f64]) -> Vec<f64> {
-        let mut r: Vec<f64> = (0..self.n_state())
-            .map(|i| {
-                tracker[i] - (0..self.planner_dim()).map(|j| self.planner_to_state[(i, j)] * planner[j]).sum::<f64>()
-            })
-            .collect();
-        self.wrap(&mut r);
-        r
+        state_space::wrap_coordinates(self.coordinates(), r);
     }
 
     /// `c = M^T p` for a matrix with `n_state` rows.
@@ -291,12 +287,6 @@ impl AffineSystem {
                 + (0..d_abs.len()).map(|j| self.g_disturbance[(i, j)].abs() * d_abs[j]).sum::<f64>();
         }
     }
-}
-
-/// `x` wrapped into the period `[min, max)`.
-pub fn wrap_periodic(x: f64, min: f64, max: f64) -> f64 {
-    let period = max - min;
-    x - period * ((x - min) / period).floor()
 }
 
 /// Every system the project defines, by id.

@@ -1,16 +1,19 @@
 //! One loaded model version: its manifest, its evaluator and the answers derived from them.
 
-use crate::teb::row_for;
+use crate::teb_rules::row_for;
 use fastrack_proto::v1 as pb;
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::manifest::{Manifest, TebRow};
 use fastrack_valuefn::runtime::{Evaluation, Evaluator, GraphDims, Runtime, RuntimeError};
+use fastrack_valuefn::system::StateSpace;
 use tonic::Status;
 
 /// A model version ready to answer.
 pub struct LoadedModel {
     /// Validated manifest.
     pub manifest: Manifest,
+    /// The relative-state space the manifest describes: what the server knows of the system.
+    pub space: StateSpace,
     /// The description sent by ListModels/GetModel.
     pub info: pb::ModelInfo,
     evaluator: Evaluator,
@@ -28,11 +31,11 @@ pub enum ModelError {
 }
 
 impl LoadedModel {
-    /// Builds `sessions` sessions for a checked bundle and warms each of them up on the centre of the domain
+    /// Builds `sessions` ONNX Runtime sessions for a checked bundle and warms each of them up on the centre of the domain
     /// (rejecting a graph whose outputs there are not finite).
     pub fn new(bundle: Bundle, runtime: &Runtime, sessions: usize) -> Result<Self, ModelError> {
         let m = &bundle.manifest;
-        let dims = GraphDims { n_state: m.n_state(), n_params: m.n_params(), n_control: m.n_control() };
+        let dims = GraphDims::of(m);
         let evaluator = Evaluator::new(runtime, &bundle.onnx, dims, sessions)?;
         let centre = |min: f64, max: f64| (0.5 * (min + max)) as f32;
         let state: Vec<f32> = m.state.iter().map(|d| centre(d.min, d.max)).collect();
@@ -41,8 +44,9 @@ impl LoadedModel {
         if let Some(bad) = warm.value.iter().chain(&warm.grad).chain(&warm.control).find(|x| !x.is_finite()) {
             return Err(ModelError::NonFinite(*bad));
         }
-        let info = crate::convert::model_info(&bundle.manifest);
-        Ok(Self { manifest: bundle.manifest, info, evaluator })
+        let space = m.state_space();
+        let info = crate::convert::model_info(&bundle.manifest, &space);
+        Ok(Self { manifest: bundle.manifest, space, info, evaluator })
     }
 
     /// Name and version, for logs and messages.
