@@ -14,7 +14,7 @@
 //! they can exploit.
 
 use crate::solver::Solution;
-use crate::verify::{rk4, Planner};
+use fastrack_valuefn::simulation::{step_relative, HeldInputs, Planner};
 use fastrack_valuefn::system::AffineSystem;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
@@ -155,7 +155,7 @@ fn roll_out(
         gradient(solution, &r, &mut shifted, &mut p);
         let u = system.optimal_control(&r, &p);
         let u_p = planner.input(system, params, &p, t, options.mean_dwell, rng);
-        rk4(system, &mut r, (&u, &u_p, &d), options.step);
+        step_relative(system, &mut r, HeldInputs { control: &u, planner: &u_p, disturbance: &d }, options.step);
         let error = system.tracking_error(&r);
         peak = peak.max(error);
         if 2 * (k + 1) > steps {

@@ -15,6 +15,7 @@
 
 use fastrack_valuefn::manifest::{Manifest, TebRow, Verification};
 use fastrack_valuefn::runtime::{Evaluator, RuntimeError};
+use fastrack_valuefn::simulation::{step_relative, HeldInputs, Planner};
 use fastrack_valuefn::system::AffineSystem;
 use fastrack_valuefn::teb::{reshape_at_served_levels, TebOptions};
 use indicatif::ProgressBar;
@@ -131,45 +132,6 @@ struct Rollouts {
     max_error: Vec<f64>,
 }
 
-/// How a rollout's planner picks its input (also used by [`crate::rollout`]).
-#[derive(Clone)]
-pub(crate) enum Planner {
-    /// The maximiser of `grad . G_p u_p` from the value's gradient.
-    WorstCase,
-    /// A random vertex of the planner's box, switched at exponentially distributed times.
-    BangBang { input: Vec<f64>, next_switch: f64 },
-}
-
-impl Planner {
-    /// A bang-bang planner that picks its first vertex at the first step.
-    pub(crate) fn bang_bang() -> Self {
-        Planner::BangBang { input: Vec::new(), next_switch: 0.0 }
-    }
-
-    /// The input at time `t` for the value gradient `grad`; a bang-bang planner switches with mean dwell
-    /// `mean_dwell`, drawing from `rng`.
-    pub(crate) fn input(
-        &mut self,
-        system: &AffineSystem,
-        params: &[f64],
-        grad: &[f64],
-        t: f64,
-        mean_dwell: f64,
-        rng: &mut StdRng,
-    ) -> Vec<f64> {
-        match self {
-            Planner::WorstCase => system.worst_planner(grad, params),
-            Planner::BangBang { input, next_switch } => {
-                if t >= *next_switch {
-                    *input = random_vertex(system, params, rng);
-                    *next_switch = t + exponential(mean_dwell, rng);
-                }
-                input.clone()
-            }
-        }
-    }
-}
-
 fn check(options: &VerifyOptions) -> Result<(), VerifyError> {
     let ok = |x: f64| x.is_finite() && x > 0.0;
     if !(ok(options.eps) && options.eps < 1.0 && ok(options.delta) && options.delta < 1.0) {
@@ -204,7 +166,7 @@ fn sample_sublevel_set(
     options: &VerifyOptions,
     rng: &mut StdRng,
 ) -> Result<(Vec<f64>, f64), VerifyError> {
-    let n_state = manifest.n_state();
+    let n_state = manifest.state.len();
     let mut accepted = Vec::with_capacity(n * n_state);
     let (mut proposed, mut inside) = (0usize, 0usize);
     while accepted.len() < n * n_state {
@@ -227,34 +189,6 @@ fn sample_sublevel_set(
         }
     }
     Ok((accepted, inside as f64 / proposed as f64))
-}
-
-fn random_vertex(system: &AffineSystem, params: &[f64], rng: &mut StdRng) -> Vec<f64> {
-    system.planner_input_param.iter().map(|&k| if rng.random_bool(0.5) { params[k] } else { -params[k] }).collect()
-}
-
-fn exponential(mean: f64, rng: &mut StdRng) -> f64 {
-    -mean * (1.0 - rng.random::<f64>()).ln()
-}
-
-/// RK4 step of `r' = f(r) + G_u u + G_p u_p + G_d d` with the inputs held.
-pub(crate) fn rk4(system: &AffineSystem, r: &mut [f64], inputs: (&[f64], &[f64], &[f64]), h: f64) {
-    let (u, u_p, d) = inputs;
-    let n = r.len();
-    let f = |x: &[f64], out: &mut [f64]| system.dynamics(x, u, u_p, d, out);
-    let (mut k1, mut k2, mut k3, mut k4, mut x) =
-        (vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n], vec![0.0; n]);
-    f(r, &mut k1);
-    x.iter_mut().enumerate().for_each(|(i, xi)| *xi = r[i] + 0.5 * h * k1[i]);
-    f(&x, &mut k2);
-    x.iter_mut().enumerate().for_each(|(i, xi)| *xi = r[i] + 0.5 * h * k2[i]);
-    f(&x, &mut k3);
-    x.iter_mut().enumerate().for_each(|(i, xi)| *xi = r[i] + h * k3[i]);
-    f(&x, &mut k4);
-    for i in 0..n {
-        r[i] += h / 6.0 * (k1[i] + 2.0 * k2[i] + 2.0 * k3[i] + k4[i]);
-    }
-    system.wrap(r);
 }
 
 /// Rolls every trajectory forward over the horizon with the served control.
@@ -280,7 +214,7 @@ fn roll_out(
             let u_p = rollouts.planners[j].input(system, params, &grad, t, options.mean_dwell, rng);
             let d = system.worst_disturbance(&grad);
             let r = &mut rollouts.states[j * n_state..(j + 1) * n_state];
-            rk4(system, r, (&u, &u_p, &d), options.step);
+            step_relative(system, r, HeldInputs { control: &u, planner: &u_p, disturbance: &d }, options.step);
             rollouts.max_error[j] = rollouts.max_error[j].max(system.tracking_error(r));
         }
     }
@@ -310,11 +244,7 @@ pub fn verify_row(
         for p in 0..per_sample {
             rollouts.states.extend_from_slice(state);
             rollouts.max_error.push(system.tracking_error(state));
-            rollouts.planners.push(if p == 0 {
-                Planner::WorstCase
-            } else {
-                Planner::BangBang { input: random_vertex(system, &params, &mut rng), next_switch: 0.0 }
-            });
+            rollouts.planners.push(if p == 0 { Planner::WorstCase } else { Planner::bang_bang() });
         }
     }
     roll_out(evaluator, system, &params, &mut rollouts, options, &mut rng)?;

@@ -3,120 +3,39 @@
 //! bearer tokens, exports Prometheus metrics, and drains gracefully on SIGINT/SIGTERM.
 
 pub mod auth;
-pub mod config;
 pub mod convert;
 pub mod deadline;
+pub mod loaded_model;
 pub mod metrics;
-pub mod model;
 pub mod repository;
 pub mod scheduler;
 pub mod services;
-pub mod teb;
+pub mod settings;
+pub mod teb_rules;
 pub mod validate;
+
+mod health;
+mod polling;
+mod shutdown;
 
 use anyhow::Context;
 use auth::{Guard, Role, Tokens};
-use config::Settings;
 use fastrack_proto::v1::{
     model_admin_service_server::ModelAdminServiceServer, model_service_server::ModelServiceServer,
     safety_service_server::SafetyServiceServer,
 };
+use health::set_health;
 use metrics::Metrics;
+use polling::spawn_repository_tasks;
 use repository::Repository;
 use scheduler::Scheduler;
+use settings::Settings;
+use shutdown::shutdown_signal;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use tonic::service::interceptor::InterceptedService;
 use tonic::transport::{Certificate, Identity, ServerTlsConfig};
-use tonic_health::server::HealthReporter;
 use tonic_health::ServingStatus;
-
-/// Services whose health is reported (plus the server as a whole, "").
-const HEALTH_SERVICES: [&str; 4] =
-    ["", "fastrack.v1.SafetyService", "fastrack.v1.ModelService", "fastrack.v1.ModelAdminService"];
-
-async fn set_health(reporter: &HealthReporter, status: ServingStatus) {
-    for service in HEALTH_SERVICES {
-        reporter.set_service_status(service, status).await;
-    }
-}
-
-/// SERVING while at least one model version is loaded.
-pub(crate) async fn refresh_health(reporter: &HealthReporter, repository: &Repository) {
-    let serving = repository.loaded_count() > 0;
-    set_health(reporter, if serving { ServingStatus::Serving } else { ServingStatus::NotServing }).await;
-}
-
-/// Resolves on SIGINT or SIGTERM.
-async fn shutdown_signal() {
-    let interrupt = tokio::signal::ctrl_c();
-    #[cfg(unix)]
-    let terminate = async {
-        match tokio::signal::unix::signal(tokio::signal::unix::SignalKind::terminate()) {
-            Ok(mut signal) => {
-                signal.recv().await;
-            }
-            Err(e) => {
-                tracing::warn!(error = %e, "cannot listen for SIGTERM");
-                std::future::pending::<()>().await
-            }
-        }
-    };
-    #[cfg(not(unix))]
-    let terminate = std::future::pending::<()>();
-    tokio::select! {
-        _ = interrupt => tracing::info!("SIGINT received, draining"),
-        _ = terminate => tracing::info!("SIGTERM received, draining"),
-    }
-}
-
-/// The initial load, then (if configured) a scan of the directory every poll interval.
-fn spawn_repository_tasks(
-    settings: &Settings,
-    repository: Arc<Repository>,
-    reporter: HealthReporter,
-) -> tokio::task::JoinHandle<()> {
-    let poll = settings.poll_interval;
-    tokio::spawn(async move {
-        let repo = Arc::clone(&repository);
-        match tokio::task::spawn_blocking(move || repo.load_all()).await {
-            Ok(Ok(outcomes)) => {
-                let failed = outcomes.iter().filter(|o| o.result.is_err()).count();
-                let loaded = repository.loaded_count();
-                if loaded == 0 {
-                    tracing::error!(failed, "no model loaded; health stays NOT_SERVING");
-                } else {
-                    tracing::info!(loaded, failed, "models ready; health SERVING");
-                }
-            }
-            Ok(Err(e)) => tracing::error!(error = %e, "model repository unreadable; health stays NOT_SERVING"),
-            Err(e) => tracing::error!(error = %e, "model loading task failed"),
-        }
-        refresh_health(&reporter, &repository).await;
-        let Some(poll) = poll else { return };
-        let mut ticker = tokio::time::interval(poll);
-        ticker.set_missed_tick_behavior(tokio::time::MissedTickBehavior::Delay);
-        ticker.tick().await;
-        loop {
-            ticker.tick().await;
-            let repo = Arc::clone(&repository);
-            match tokio::task::spawn_blocking(move || repo.sync()).await {
-                Ok(Ok(report)) if !report.outcomes.is_empty() || !report.removed.is_empty() => {
-                    tracing::info!(
-                        loaded = report.outcomes.iter().filter(|o| o.result.is_ok()).count(),
-                        rejected = report.outcomes.iter().filter(|o| o.result.is_err()).count(),
-                        removed = report.removed.len(),
-                        "repository changed"
-                    );
-                    refresh_health(&reporter, &repository).await;
-                }
-                Ok(Ok(_)) => {}
-                Ok(Err(e)) => tracing::warn!(error = %e, "repository scan failed; serving what is loaded"),
-                Err(e) => tracing::error!(error = %e, "repository scan task failed"),
-            }
-        }
-    })
-}
 
 /// A request id: the caller's `x-request-id` if sent, else a fresh one unique within this process.
 fn request_id(request: &tonic::codegen::http::Request<()>) -> String {
@@ -127,7 +46,7 @@ fn request_id(request: &tonic::codegen::http::Request<()>) -> String {
     }
 }
 
-fn tls_config(tls: &config::TlsFiles) -> ServerTlsConfig {
+fn tls_config(tls: &settings::TlsFiles) -> ServerTlsConfig {
     let config = ServerTlsConfig::new().identity(Identity::from_pem(&tls.cert, &tls.key));
     match &tls.client_ca {
         Some(ca) => config.client_ca_root(Certificate::from_pem(ca)),
@@ -185,11 +104,15 @@ pub async fn run(settings: Settings) -> anyhow::Result<()> {
         None => None,
     };
 
-    let reflection = tonic_reflection::server::Builder::configure()
-        .register_encoded_file_descriptor_set(fastrack_proto::FILE_DESCRIPTOR_SET)
-        .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
-        .build_v1()
-        .context("building the reflection service")?;
+    // Reflection in both protocol versions: grpcurl and current tools speak v1, Python's grpcio-reflection
+    // and older tools v1alpha only.
+    let descriptors = || {
+        tonic_reflection::server::Builder::configure()
+            .register_encoded_file_descriptor_set(fastrack_proto::FILE_DESCRIPTOR_SET)
+            .register_encoded_file_descriptor_set(tonic_health::pb::FILE_DESCRIPTOR_SET)
+    };
+    let reflection = descriptors().build_v1().context("building the reflection service")?;
+    let reflection_v1alpha = descriptors().build_v1alpha().context("building the v1alpha reflection service")?;
     let (drain_tx, drain_rx) = tokio::sync::watch::channel(false);
     let limit = settings.max_message_bytes;
     let safety = SafetyServiceServer::new(services::safety::Safety {
@@ -241,6 +164,7 @@ pub async fn run(settings: Settings) -> anyhow::Result<()> {
     let serve = builder
         .add_service(health)
         .add_service(reflection)
+        .add_service(reflection_v1alpha)
         .add_service(InterceptedService::new(models, user_guard.clone()))
         .add_service(InterceptedService::new(safety, user_guard))
         .add_service(InterceptedService::new(admin, admin_guard))

@@ -6,6 +6,7 @@
 //! - [`provenance`]: machine, revision and time stamps for manifests and bench records.
 //! - [`record`]: measurement records under `bench/results/`.
 //! - [`teb`]: TEB tables from a value function (`V_min` per `beta`, extent, boundary).
+//! - [`simulation`]: RK4 with held inputs and the planner models every rollout shares.
 //! - `onnx_writer` (feature `writer`): the network plus control law as an ONNX graph.
 //! - `plot` (feature `plot`): PNG line charts.
 //! - `runtime` (feature `runtime`): ONNX Runtime loading and a pooled batch evaluator.
@@ -15,6 +16,7 @@ pub mod manifest;
 pub mod network;
 pub mod provenance;
 pub mod record;
+pub mod simulation;
 pub mod system;
 pub mod teb;
 

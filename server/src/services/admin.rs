@@ -94,7 +94,7 @@ impl ModelAdminService for Admin {
         let req = request.into_inner();
         let model = pb::ModelRef { name: req.name.clone(), version: req.version };
         let answer = self.load_one(req).await;
-        crate::refresh_health(&self.health, &self.repository).await;
+        crate::health::refresh_health(&self.health, &self.repository).await;
         observe(&self.metrics, &self.repository, "LoadModel", Some(&model), start, answer)
     }
 
@@ -106,7 +106,7 @@ impl ModelAdminService for Admin {
         let req = request.into_inner();
         let answer = self.unload_one(&req);
         let model = pb::ModelRef { name: req.name, version: req.version };
-        crate::refresh_health(&self.health, &self.repository).await;
+        crate::health::refresh_health(&self.health, &self.repository).await;
         observe(&self.metrics, &self.repository, "UnloadModel", Some(&model), start, answer)
     }
 
@@ -118,7 +118,7 @@ impl ModelAdminService for Admin {
         let name = request.into_inner().name;
         let model = pb::ModelRef { name: name.clone(), version: 0 };
         let answer = self.reload(name).await;
-        crate::refresh_health(&self.health, &self.repository).await;
+        crate::health::refresh_health(&self.health, &self.repository).await;
         observe(&self.metrics, &self.repository, "ReloadModel", Some(&model), start, answer)
     }
 }
