@@ -2,7 +2,7 @@
 
 use anyhow::Context;
 use clap::Parser;
-use fastrack_server::config::{LogFormat, Options, Settings};
+use fastrack_server::settings::{LogFormat, Options, Settings};
 
 #[tokio::main]
 async fn main() -> anyhow::Result<()> {

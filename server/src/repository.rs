@@ -2,8 +2,8 @@
 //! and synchronisation with the directory (new, changed and removed version folders). A version is only
 //! replaced by a bundle that loaded and warmed up; requests keep the `Arc` of the version they started on.
 
+use crate::loaded_model::LoadedModel;
 use crate::metrics::Metrics;
-use crate::model::LoadedModel;
 use fastrack_proto::v1 as pb;
 use fastrack_valuefn::bundle::{scan_repository, Bundle, MANIFEST_FILE, MODEL_FILE};
 use fastrack_valuefn::runtime::Runtime;

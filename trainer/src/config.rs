@@ -108,7 +108,7 @@ pub struct NetworkConfig {
     #[serde(default = "default_first_layer_scale")]
     pub first_layer_scale: f64,
     /// How periodic coordinates (the heading) enter the network: `circle` (default; `(cos, sin)`, periodic by
-    /// construction) or `wrap` (the wrapped angle as one input, as every run before the eighth session).
+    /// construction) or `wrap` (the wrapped angle as one input, as the first bundles were trained).
     #[serde(default)]
     pub periodic_encoding: PeriodicEncoding,
 }

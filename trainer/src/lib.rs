@@ -2,16 +2,16 @@
 //! their export as served, validated model bundles.
 
 pub mod allocator;
-pub mod bench;
 pub mod causal;
 pub mod config;
 pub mod dynamics;
 pub mod export;
 pub mod features;
-pub mod model;
 pub mod objective;
 pub mod report;
 pub mod sampler;
 pub mod sincos;
+pub mod siren;
+pub mod step_bench;
 pub mod supervision;
 pub mod train;

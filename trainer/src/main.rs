@@ -4,7 +4,7 @@ use anyhow::Context;
 use clap::{Parser, Subcommand};
 use fastrack_trainer::config::TrainConfig;
 use fastrack_trainer::export;
-use fastrack_trainer::train::{checkpoint_network, train, RunDir, Session};
+use fastrack_trainer::train::{checkpoint_network, train, RunDir, TrainOptions};
 use fastrack_valuefn::manifest::Provenance;
 use fastrack_valuefn::network::{FeatureLayout, NetworkShape, ValueNetwork};
 use fastrack_valuefn::system::{by_id, SYSTEM_IDS};
@@ -63,7 +63,7 @@ enum Command {
         /// Continue from the run directory's checkpoint.
         #[arg(long)]
         resume: bool,
-        /// Stop after this many iterations in this session (continue later with --resume).
+        /// Stop after this many iterations in this call (continue later with --resume).
         #[arg(long)]
         max_iterations: Option<u64>,
         /// Compute device: flex (CPU), cuda, wgpu (the last two need the cargo features of that name).
@@ -166,7 +166,7 @@ fn main() -> anyhow::Result<()> {
             let flag = Arc::clone(&stop);
             ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;
             let run = RunDir(run_dir);
-            let session = Session {
+            let options = TrainOptions {
                 run: &run,
                 resume,
                 max_iterations,
@@ -174,7 +174,7 @@ fn main() -> anyhow::Result<()> {
                 stop: Arc::clone(&stop),
                 hamiltonian_sign: 1.0,
             };
-            let (_, state) = train(&config, &device, session)?;
+            let (_, state) = train(&config, &device, options)?;
             let figure = fastrack_trainer::report::plot_losses(&run)?;
             eprintln!("loss curves: {}", figure.display());
             if stop.load(Ordering::Relaxed) {
@@ -191,7 +191,7 @@ fn main() -> anyhow::Result<()> {
             let mut grid = grid_solutions
                 .iter()
                 .map(|path| {
-                    let solution = fastrack_grid::format::load(path)?;
+                    let solution = fastrack_gridfile::format::load(path)?;
                     let beta = solution.info.params.first().copied().context("a solution without parameters")?;
                     Ok((beta, solution.values.iter().copied().fold(f64::INFINITY, f64::min)))
                 })
@@ -246,7 +246,7 @@ fn main() -> anyhow::Result<()> {
 /// Runs the training-speed benchmark and writes its record.
 fn run_bench(config_path: &std::path::Path, out: &std::path::Path, record: &str) -> anyhow::Result<()> {
     let config = &TrainConfig::load(config_path)?;
-    use fastrack_trainer::bench::{
+    use fastrack_trainer::step_bench::{
         flops_per_iteration, iterations_per_second, matmul_gflops, torch_iterations_per_second, Case,
     };
     use fastrack_valuefn::record::{write_record, Table};

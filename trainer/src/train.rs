@@ -3,9 +3,9 @@
 //! checkpoint on Ctrl-C.
 
 use crate::config::TrainConfig;
-use crate::model::Siren;
 use crate::objective::{LossTerms, Objective};
 use crate::sampler::Sampler;
+use crate::siren::Siren;
 use crate::supervision::GridSupervision;
 use anyhow::{ensure, Context};
 use burn::grad_clipping::GradientClippingConfig;
@@ -28,7 +28,7 @@ pub struct RunState {
     pub config: TrainConfig,
     /// Iterations completed.
     pub iteration: u64,
-    /// Training wall time so far (s), over all sessions.
+    /// Training wall time so far (s), over every call that trained the run (resumed ones too).
     pub wall_time_s: f64,
     /// Loss terms of the last iteration: total, boundary, residual, grid supervision of `V` and of `dV/dr`
     /// (checkpoints written before supervision existed hold the first three).
@@ -92,13 +92,13 @@ pub fn checkpoint_network(run: &RunDir, device: &Device) -> anyhow::Result<(Valu
     Ok((network, state))
 }
 
-/// Options of one training session.
-pub struct Session<'a> {
+/// How one call of [`train`] runs: where, from where, how far, and whether to show progress.
+pub struct TrainOptions<'a> {
     /// Run directory (checkpoints, logs).
     pub run: &'a RunDir,
     /// Continue from the run's checkpoint.
     pub resume: bool,
-    /// Stop after this many iterations in this session (the run continues with `--resume`).
+    /// Stop after this many iterations in this call (the run continues with `--resume`).
     pub max_iterations: Option<u64>,
     /// Show a progress bar.
     pub progress: bool,
@@ -109,7 +109,11 @@ pub struct Session<'a> {
 }
 
 /// Trains (or continues) a run; returns the network and the final state.
-pub fn train(config: &TrainConfig, device: &Device, session: Session<'_>) -> anyhow::Result<(ValueNetwork, RunState)> {
+pub fn train(
+    config: &TrainConfig,
+    device: &Device,
+    options: TrainOptions<'_>,
+) -> anyhow::Result<(ValueNetwork, RunState)> {
     crate::allocator::tune_for_training();
     let system = config.system()?;
     let mut network = initial_network(config, &system);
@@ -119,9 +123,9 @@ pub fn train(config: &TrainConfig, device: &Device, session: Session<'_>) -> any
         adam = adam.with_grad_clipping(Some(GradientClippingConfig::Norm(norm as f32)));
     }
     let mut optimizer = adam.init();
-    let run = session.run;
+    let run = options.run;
     let mut state = RunState { config: config.clone(), iteration: 0, wall_time_s: 0.0, last_losses: None };
-    if session.resume {
+    if options.resume {
         state = run.load_state()?;
         ensure!(
             state.config == *config,
@@ -141,7 +145,7 @@ pub fn train(config: &TrainConfig, device: &Device, session: Session<'_>) -> any
     }
     let objective = {
         let mut o = Objective::new(config, &system, &network.input, device);
-        o.hamiltonian_sign = session.hamiltonian_sign;
+        o.hamiltonian_sign = options.hamiltonian_sign;
         match &config.supervision {
             Some(s) => o.with_supervision(GridSupervision::load(s, &system, config.sampling.tau_max, config.seed)?),
             None => o,
@@ -157,8 +161,8 @@ pub fn train(config: &TrainConfig, device: &Device, session: Session<'_>) -> any
     .with_focus(config.sampling.focus_share, config.sampling.focus_scale)
     .with_tau_exponent(config.sampling.tau_exponent);
     let total = config.optimizer.iterations;
-    let end = session.max_iterations.map_or(total, |m| (state.iteration + m).min(total));
-    let bar = if session.progress { indicatif::ProgressBar::new(total) } else { indicatif::ProgressBar::hidden() };
+    let end = options.max_iterations.map_or(total, |m| (state.iteration + m).min(total));
+    let bar = if options.progress { indicatif::ProgressBar::new(total) } else { indicatif::ProgressBar::hidden() };
     bar.set_style(
         indicatif::ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} {per_sec} eta {eta} {msg}")
             .expect("progress template")
@@ -166,9 +170,9 @@ pub fn train(config: &TrainConfig, device: &Device, session: Session<'_>) -> any
     );
     bar.set_position(state.iteration);
     let mut log = std::fs::OpenOptions::new().append(true).open(run.losses())?;
-    let session_start = Instant::now();
+    let call_start = Instant::now();
     let wall_before = state.wall_time_s;
-    while state.iteration < end && !session.stop.load(Ordering::Relaxed) {
+    while state.iteration < end && !options.stop.load(Ordering::Relaxed) {
         let it = state.iteration;
         let batch = sampler.batch(it, config.tau_limit(it), device);
         let (loss, terms) = objective.loss(&model, &batch, it);
@@ -178,7 +182,7 @@ pub fn train(config: &TrainConfig, device: &Device, session: Session<'_>) -> any
         state.iteration += 1;
         state.last_losses =
             Some(vec![terms.total, terms.boundary, terms.residual, terms.supervision, terms.supervision_gradient]);
-        state.wall_time_s = wall_before + session_start.elapsed().as_secs_f64();
+        state.wall_time_s = wall_before + call_start.elapsed().as_secs_f64();
         if it.is_multiple_of(10) || state.iteration == end {
             write_log_line(&mut log, it, &terms, config.tau_limit(it), config.learning_rate(it), state.wall_time_s)?;
             bar.set_message(format!(

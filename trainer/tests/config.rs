@@ -2,7 +2,7 @@
 //! exactly where an uninterrupted one would be.
 
 use fastrack_trainer::config::TrainConfig;
-use fastrack_trainer::train::{train, RunDir, Session};
+use fastrack_trainer::train::{train, RunDir, TrainOptions};
 use std::path::Path;
 use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
@@ -84,8 +84,8 @@ fn a_resumed_run_matches_an_uninterrupted_one() {
     config.optimizer.iterations = 40;
     config.checkpoint_every = 10;
     let device = burn::tensor::Device::flex().autodiff();
-    fn session(run: &RunDir, resume: bool, max_iterations: Option<u64>) -> Session<'_> {
-        Session {
+    fn options(run: &RunDir, resume: bool, max_iterations: Option<u64>) -> TrainOptions<'_> {
+        TrainOptions {
             run,
             resume,
             max_iterations,
@@ -96,10 +96,10 @@ fn a_resumed_run_matches_an_uninterrupted_one() {
     }
     let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
     let (whole_run, split_run) = (RunDir(a.path().into()), RunDir(b.path().into()));
-    let (whole, _) = train(&config, &device, session(&whole_run, false, None)).unwrap();
-    train(&config, &device, session(&split_run, false, Some(25))).unwrap();
+    let (whole, _) = train(&config, &device, options(&whole_run, false, None)).unwrap();
+    train(&config, &device, options(&split_run, false, Some(25))).unwrap();
     assert_eq!(split_run.load_state().unwrap().iteration, 25);
-    let (resumed, state) = train(&config, &device, session(&split_run, true, None)).unwrap();
+    let (resumed, state) = train(&config, &device, options(&split_run, true, None)).unwrap();
     assert_eq!(state.iteration, 40);
     let worst = whole
         .layers

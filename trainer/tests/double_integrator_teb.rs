@@ -10,7 +10,7 @@
 
 use burn::tensor::Device;
 use fastrack_trainer::config::TrainConfig;
-use fastrack_trainer::train::{train, RunDir, Session};
+use fastrack_trainer::train::{train, RunDir, TrainOptions};
 use fastrack_valuefn::system::double_integrator::closed_form_teb;
 use fastrack_valuefn::teb::{teb_table, AtHorizon, TebOptions};
 use std::sync::atomic::AtomicBool;
@@ -27,7 +27,7 @@ fn mean_teb_error(sign: f64) -> Result<f64, String> {
     let config = TrainConfig::load(&path).unwrap();
     let system = config.system().unwrap();
     let run = tempfile::tempdir().unwrap();
-    let session = Session {
+    let options = TrainOptions {
         run: &RunDir(run.path().to_path_buf()),
         resume: false,
         max_iterations: None,
@@ -35,7 +35,7 @@ fn mean_teb_error(sign: f64) -> Result<f64, String> {
         stop: Arc::new(AtomicBool::new(false)),
         hamiltonian_sign: sign,
     };
-    let (network, _) = train(&config, &Device::flex().autodiff(), session).expect("training runs");
+    let (network, _) = train(&config, &Device::flex().autodiff(), options).expect("training runs");
     let oracle = AtHorizon { network: &network, tau: config.sampling.tau_max };
     let report = teb_table(&oracle, &system, &TebOptions::default())?;
     let errors: Vec<f64> =

@@ -16,7 +16,7 @@ use fastrack_grid::grid::Grid;
 use fastrack_grid::scheme::Flux;
 use fastrack_grid::solver::{solve, SolverConfig};
 use fastrack_trainer::config::TrainConfig;
-use fastrack_trainer::train::{train, RunDir, Session};
+use fastrack_trainer::train::{train, RunDir, TrainOptions};
 use fastrack_valuefn::network::ValueNetwork;
 use fastrack_valuefn::system::double_integrator::closed_form_teb;
 use fastrack_valuefn::system::AffineSystem;
@@ -106,7 +106,7 @@ fn train_supervised(sign: f64) -> Outcome {
         save(&solution, file).unwrap();
     }
 
-    let session = Session {
+    let options = TrainOptions {
         run: &RunDir(dir.path().join("run")),
         resume: false,
         max_iterations: None,
@@ -114,7 +114,7 @@ fn train_supervised(sign: f64) -> Outcome {
         stop: Arc::new(AtomicBool::new(false)),
         hamiltonian_sign: sign,
     };
-    let (network, _) = train(&config, &Device::flex().autodiff(), session).expect("training runs");
+    let (network, _) = train(&config, &Device::flex().autodiff(), options).expect("training runs");
     let oracle = AtHorizon { network: &network, tau: config.sampling.tau_max };
     let report = teb_table(&oracle, &system, &TebOptions::default()).expect("a table");
     assert!(report.rows.len() >= 16);

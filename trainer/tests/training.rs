@@ -4,9 +4,9 @@
 use burn::tensor::{Device, Tensor, TensorData};
 use fastrack_trainer::config::TrainConfig;
 use fastrack_trainer::features::TensorFeatures;
-use fastrack_trainer::model::Siren;
 use fastrack_trainer::objective::Objective;
 use fastrack_trainer::sampler::Sampler;
+use fastrack_trainer::siren::Siren;
 use fastrack_trainer::train::initial_network;
 use fastrack_valuefn::network::{FeatureLayout, NetworkShape, PeriodicEncoding, ValueNetwork};
 use fastrack_valuefn::system::{double_integrator, dubins4d, AffineSystem};

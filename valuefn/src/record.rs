@@ -1,4 +1,4 @@
-//! Measurement records (DESIGN.md §7): `bench/results/<name>.json` (what ran, the exact command, config,
+//! Measurement records (bench/results/README.md): `bench/results/<name>.json` (what ran, the exact command, config,
 //! machine, date, revision, figures) and a markdown table beside it.
 
 use crate::provenance::{machine_description, source_revision, utc_now_rfc3339};

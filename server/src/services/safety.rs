@@ -5,7 +5,7 @@ use super::observe;
 use crate::metrics::Metrics;
 use crate::repository::Repository;
 use crate::scheduler::{BatchResult, Scheduler};
-use crate::teb::query_planner_control;
+use crate::teb_rules::query_planner_control;
 use crate::validate::{self, ValidBatch, MAX_BOUNDARY_POINTS};
 use fastrack_proto::v1 as pb;
 use fastrack_valuefn::manifest::{boundary_directions, TebRow};

@@ -42,7 +42,7 @@ pub fn iterations_per_second(base: &TrainConfig, case: &Case, device: &Device) -
     config.sampling.points = case.points;
     let system = config.system()?;
     let network = initial_network(&config, &system);
-    let mut model = crate::model::Siren::from_network(&network, device);
+    let mut model = crate::siren::Siren::from_network(&network, device);
     let mut optimizer = AdamConfig::new().init();
     let objective = Objective::new(&config, &system, &network.input, device);
     let sampler =

@@ -151,14 +151,14 @@ async fn track_stream_answers_every_tick_in_order_and_keeps_beta_old() {
     let dir = write_test_bundle(repo.path(), &dubins4d::system(), "dubins-test", 1, 4);
     let (reference, manifest) = evaluator_for(&dir);
     let (_server, client) = TestServer::start_serving(repo.path()).await;
-    let mut session = client.track(model_ref("dubins-test", 0), 5.0).await.unwrap();
+    let mut stream = client.track(model_ref("dubins-test", 0), 5.0).await.unwrap();
 
     let ticks = [(None, 1.25), (Some(1.0), 0.65), (Some(0.0), 0.5), (Some(10.0), 1.25)];
     let mut expected_beta_old = 1.25;
     for (seq, (d_obs, expected_beta)) in ticks.iter().enumerate() {
         let tracker = vec![0.3 + 0.1 * seq as f64, -0.2, 7.0, 1.1];
         let planner = vec![0.1, 0.4];
-        let reply = session
+        let reply = stream
             .tick(pb::TrackTick {
                 seq: seq as u64,
                 tracker_state: tracker.clone(),
@@ -186,14 +186,14 @@ async fn track_stream_answers_every_tick_in_order_and_keeps_beta_old() {
     }
 
     // A bad tick gets an error reply; the stream stays open and beta_old is untouched.
-    let bad = session
+    let bad = stream
         .tick(pb::TrackTick { seq: 99, tracker_state: vec![0.0; 3], planner_state: vec![0.0; 2], d_obs: None })
         .await
         .unwrap();
     let error = bad.error.expect("error reply");
     assert_eq!(error.code, tonic::Code::InvalidArgument as i32);
     assert!(error.message.contains("tracker_state has 3 values"), "{}", error.message);
-    let nan = session
+    let nan = stream
         .tick(pb::TrackTick {
             seq: 100,
             tracker_state: vec![0.0, f64::NAN, 0.0, 1.0],
@@ -203,7 +203,7 @@ async fn track_stream_answers_every_tick_in_order_and_keeps_beta_old() {
         .await
         .unwrap();
     assert!(nan.error.unwrap().message.contains("tracker_state[1] is NaN"));
-    let good = session
+    let good = stream
         .tick(pb::TrackTick {
             seq: 101,
             tracker_state: vec![0.0, 0.0, 0.0, 1.0],
@@ -213,7 +213,7 @@ async fn track_stream_answers_every_tick_in_order_and_keeps_beta_old() {
         .await
         .unwrap();
     assert!(good.error.unwrap().message.contains("d_obs = -1"));
-    let good = session
+    let good = stream
         .tick(pb::TrackTick {
             seq: 102,
             tracker_state: vec![0.0, 0.0, 0.0, 1.0],
@@ -226,7 +226,7 @@ async fn track_stream_answers_every_tick_in_order_and_keeps_beta_old() {
 
     // Many ticks pipelined: every one answered, in order.
     for seq in 0..200u64 {
-        session
+        stream
             .send(pb::TrackTick {
                 seq,
                 tracker_state: vec![0.0, 0.0, 0.0, 1.0],
@@ -237,7 +237,7 @@ async fn track_stream_answers_every_tick_in_order_and_keeps_beta_old() {
             .unwrap();
     }
     for seq in 0..200u64 {
-        assert_eq!(session.recv().await.unwrap().unwrap().seq, seq);
+        assert_eq!(stream.recv().await.unwrap().unwrap().seq, seq);
     }
 }
 
