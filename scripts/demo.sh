@@ -1,21 +1,17 @@
 #!/usr/bin/env bash
 # The main job: starts the server on the shipped model repository (models/) and drives it with a short
-# scripted client session through the `fastrack` CLI (every RPC, a Track stream, a short load run), shows
+# scripted client run through the `fastrack` CLI (every RPC, a Track stream, a short load run), shows
 # the Prometheus metrics, then shuts the server down gracefully.
 set -euo pipefail
 cd "$(dirname "$0")/.."
-bash scripts/setup-onnxruntime.sh >/dev/null
-cargo build -j2 -p fastrack-server -p fastrack-client --bins
+bash scripts/build.sh
 port=${FASTRACK_DEMO_PORT:-50151}
 export FASTRACK_SERVER="http://127.0.0.1:$port"
 metrics_port=${FASTRACK_DEMO_METRICS_PORT:-50152}
 ./target/debug/fastrack-server --listen "127.0.0.1:$port" --models models --metrics-listen "127.0.0.1:$metrics_port" &
 server=$!
 trap 'kill $server 2>/dev/null || true' EXIT
-for _ in $(seq 1 100); do
-  [[ "$(./target/debug/fastrack health 2>/dev/null)" == SERVING ]] && break
-  sleep 0.2
-done
+./target/debug/fastrack health --wait-s 30 >/dev/null
 fastrack() { echo; echo "\$ fastrack $*"; ./target/debug/fastrack "$@"; }
 model=${FASTRACK_DEMO_MODEL:-dubins4d}   # the trained model; untrained-dubins4d is the seeded stand-in
 fastrack health

@@ -1,4 +1,6 @@
-//! The `fastrack.v1` gRPC contract, generated from `proto/fastrack/v1/*.proto`.
+//! The `fastrack.v1` gRPC contract, generated from `proto/fastrack/v1/*.proto`, and its API reference.
+
+pub mod reference;
 
 /// Generated messages and stubs of package `fastrack.v1`.
 pub mod v1 {
@@ -8,3 +10,6 @@ pub mod v1 {
 
 /// Encoded `FileDescriptorSet` of the contract, for server reflection.
 pub const FILE_DESCRIPTOR_SET: &[u8] = include_bytes!(concat!(env!("OUT_DIR"), "/fastrack_descriptor.bin"));
+
+/// The API reference (markdown) the build generated from the contract; `docs/api-reference.md` holds a copy.
+pub const API_REFERENCE: &str = include_str!(concat!(env!("OUT_DIR"), "/api-reference.md"));
