@@ -30,7 +30,7 @@ use polling::spawn_repository_tasks;
 use repository::Repository;
 use scheduler::Scheduler;
 use settings::Settings;
-use shutdown::shutdown_signal;
+use shutdown::{begin_drain, drain_deadline};
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use tonic::service::interceptor::InterceptedService;
@@ -150,17 +150,7 @@ pub async fn run(settings: Settings) -> anyhow::Result<()> {
     if let Some(tls) = &settings.tls {
         builder = builder.tls_config(tls_config(tls)).context("TLS configuration")?;
     }
-    let stop = {
-        let reporter = reporter.clone();
-        let repository_tasks = repository_tasks.abort_handle();
-        async move {
-            shutdown_signal().await;
-            // No more polling: it must not turn health back to SERVING while draining.
-            repository_tasks.abort();
-            set_health(&reporter, ServingStatus::NotServing).await;
-            let _ = drain_tx.send(true);
-        }
-    };
+    let stop = begin_drain(reporter.clone(), repository_tasks.abort_handle(), drain_tx);
     let serve = builder
         .add_service(health)
         .add_service(reflection)
@@ -173,14 +163,9 @@ pub async fn run(settings: Settings) -> anyhow::Result<()> {
             stop,
         );
     let grace = settings.shutdown_grace;
-    let mut draining = drain_rx;
-    let drain_deadline = async move {
-        let _ = draining.wait_for(|d| *d).await;
-        tokio::time::sleep(grace).await;
-    };
     tokio::select! {
         result = serve => result.context("serving")?,
-        _ = drain_deadline => tracing::warn!(
+        _ = drain_deadline(drain_rx, grace) => tracing::warn!(
             open_streams = metrics.active_streams(),
             grace_s = grace.as_secs_f64(),
             "drain deadline passed; exiting with calls still open"
