@@ -11,6 +11,11 @@
 
 pub use fastrack_proto::v1 as pb;
 
+/// The README's Rust example, compiled as a doctest so that it cannot drift from this crate.
+#[cfg(doctest)]
+#[doc = include_str!("../../README.md")]
+pub struct ReadmeExample;
+
 use pb::model_admin_service_client::ModelAdminServiceClient;
 use pb::model_service_client::ModelServiceClient;
 use pb::safety_service_client::SafetyServiceClient;
