@@ -1,5 +1,7 @@
-//! The `fastrack.v1` gRPC contract, generated from `proto/fastrack/v1/*.proto`, and its API reference.
+//! The `fastrack.v1` gRPC contract, generated from `proto/fastrack/v1/*.proto`, the planner-speed rules both
+//! of its sides apply to a TEB table, and the contract's API reference.
 
+pub mod planner_speed;
 pub mod reference;
 
 /// Generated messages and stubs of package `fastrack.v1`.

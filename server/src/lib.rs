@@ -11,7 +11,6 @@ pub mod repository;
 pub mod scheduler;
 pub mod services;
 pub mod settings;
-pub mod teb_rules;
 pub mod validate;
 
 mod health;

@@ -1,6 +1,6 @@
 //! One loaded model version: its manifest, its evaluator and the answers derived from them.
 
-use crate::teb_rules::row_for;
+use fastrack_proto::planner_speed::{self, SpeedRow};
 use fastrack_proto::v1 as pb;
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::manifest::{Manifest, TebRow};
@@ -16,6 +16,8 @@ pub struct LoadedModel {
     pub space: StateSpace,
     /// The description sent by ListModels/GetModel.
     pub info: pb::ModelInfo,
+    /// The TEB table as the planner-speed rules read it: each row's `beta` and served level.
+    pub speeds: Vec<SpeedRow>,
     evaluator: Evaluator,
 }
 
@@ -46,7 +48,8 @@ impl LoadedModel {
         }
         let space = m.state_space();
         let info = crate::convert::model_info(&bundle.manifest, &space);
-        Ok(Self { manifest: bundle.manifest, space, info, evaluator })
+        let speeds = info.teb_table.iter().map(SpeedRow::from).collect();
+        Ok(Self { manifest: bundle.manifest, space, info, speeds, evaluator })
     }
 
     /// Name and version, for logs and messages.
@@ -54,9 +57,9 @@ impl LoadedModel {
         format!("{}/{}", self.manifest.name, self.manifest.version)
     }
 
-    /// The TEB row answering for `beta` (see [`row_for`]).
+    /// The TEB row answering for `beta` ([`planner_speed::row_for`]).
     pub fn row_for(&self, beta: f64) -> Option<&TebRow> {
-        row_for(&self.manifest.teb_table, beta)
+        planner_speed::row_for(&self.speeds, beta).map(|i| &self.manifest.teb_table[i])
     }
 
     /// `V <= TEB level` of the row for `beta`.

@@ -5,8 +5,8 @@ use super::observe;
 use crate::metrics::Metrics;
 use crate::repository::Repository;
 use crate::scheduler::{BatchResult, Scheduler};
-use crate::teb_rules::query_planner_control;
 use crate::validate::{self, ValidBatch, MAX_BOUNDARY_POINTS};
+use fastrack_proto::planner_speed::query_planner_control;
 use fastrack_proto::v1 as pb;
 use fastrack_valuefn::manifest::{boundary_directions, TebRow};
 use pb::safety_service_server::SafetyService;
@@ -135,7 +135,7 @@ impl SafetyService for Safety {
         let answer = (|| {
             let model = self.repository.resolve(req.model.as_ref())?;
             let d_obs = validate::d_obs(req.d_obs)?;
-            let q = query_planner_control(&model.manifest.teb_table, d_obs);
+            let q = query_planner_control(&model.speeds, d_obs);
             Ok(Response::new(pb::QueryPlannerControlResponse {
                 beta_query: q.beta,
                 dteb_radius: q.dteb_radius,

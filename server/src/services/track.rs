@@ -4,8 +4,8 @@ use crate::loaded_model::LoadedModel;
 use crate::metrics::{code_name, Metrics};
 use crate::repository::Repository;
 use crate::scheduler::Scheduler;
-use crate::teb_rules::query_planner_control;
 use crate::validate;
+use fastrack_proto::planner_speed::query_planner_control;
 use fastrack_proto::v1 as pb;
 use pb::track_request::Msg;
 use std::sync::Arc;
@@ -178,7 +178,7 @@ async fn evaluate_tick(
 ) -> Result<pb::TrackReply, Status> {
     validate::tick(model, &tick.tracker_state, &tick.planner_state)?;
     let d_obs = validate::d_obs(tick.d_obs)?;
-    let speed = query_planner_control(&model.manifest.teb_table, d_obs);
+    let speed = query_planner_control(&model.speeds, d_obs);
     let relative = model.space.relative_state(&tick.tracker_state, &tick.planner_state);
     let params = vec![speed.beta; model.manifest.n_params()];
     let batch = validate::batch(model, &relative, &params, pb::OutOfDomainPolicy::Flag)?;

@@ -1,0 +1,117 @@
+//! The rules both sides of the contract apply to a TEB table: the paper's queryPlannerControl and the row
+//! that answers for a `beta`. The server answers with them; an online loop applies them to its copy of the
+//! table (from `GetModel`) to plan a step before it asks, so that a step costs one round trip, and checks
+//! the server's answer against its own. Neither rule ever interpolates towards a less safe answer.
+
+use crate::v1 as pb;
+
+/// One row of a TEB table as the rules read it.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct SpeedRow {
+    /// Planner speed bound `beta`.
+    pub beta: f64,
+    /// The served level of the row's error set: the TEB radius at `beta`.
+    pub level: f64,
+}
+
+impl From<&pb::TebRow> for SpeedRow {
+    fn from(row: &pb::TebRow) -> Self {
+        Self { beta: row.beta, level: row.level }
+    }
+}
+
+/// What queryPlannerControl chose.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct PlannerSpeed {
+    /// The planner speed bound to use, `beta_query`.
+    pub beta: f64,
+    /// Index of its row in the table.
+    pub row: usize,
+    /// TEB radius at `beta` (the dTEB, `dTEBmax` in the paper's Alg. 3).
+    pub dteb_radius: f64,
+    /// TEB radius at `beta_l` (the sTEB).
+    pub steb_radius: f64,
+    /// The sTEB does not fit in the ball of radius `d_obs / 2`.
+    pub steb_exceeds_half_distance: bool,
+}
+
+/// queryPlannerControl: with no obstacle sensed (`d_obs = None`) the fastest row; otherwise, if the sTEB
+/// radius exceeds `d_obs / 2`, the slowest row (`beta_l`), else the largest `beta` whose radius is at most
+/// `d_obs / 2`. `rows` must be non-empty, sorted by `beta`, with monotone levels (as a validated manifest
+/// and `GetModel` give them).
+pub fn query_planner_control(rows: &[SpeedRow], d_obs: Option<f64>) -> PlannerSpeed {
+    let steb_radius = rows[0].level;
+    let row = match d_obs {
+        None => rows.len() - 1,
+        Some(d) => rows.iter().rposition(|row| row.level <= d / 2.0).unwrap_or(0),
+    };
+    PlannerSpeed {
+        beta: rows[row].beta,
+        row,
+        dteb_radius: rows[row].level,
+        steb_radius,
+        steb_exceeds_half_distance: d_obs.is_some_and(|d| steb_radius > d / 2.0),
+    }
+}
+
+/// The row answering for `beta`: the first whose `beta` is at least the requested one (its level bounds
+/// every smaller `beta`, the table being monotone). `None` if `beta` exceeds the last row.
+pub fn row_for(rows: &[SpeedRow], beta: f64) -> Option<usize> {
+    rows.iter().position(|row| row.beta >= beta - 1e-12 * row.beta.abs().max(1.0))
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A hand-made table: beta = 0.5 + 0.05 k, level = 0.2 + 0.1 k (k = 0..15).
+    fn table() -> Vec<SpeedRow> {
+        (0..16).map(|k| SpeedRow { beta: 0.5 + 0.05 * k as f64, level: 0.2 + 0.1 * k as f64 }).collect()
+    }
+
+    #[test]
+    fn no_obstacle_gives_fastest_beta() {
+        let q = query_planner_control(&table(), None);
+        assert_eq!((q.beta, q.row), (0.5 + 0.05 * 15.0, 15));
+        assert!((q.dteb_radius - 1.7).abs() < 1e-12);
+        assert!((q.steb_radius - 0.2).abs() < 1e-12);
+        assert!(!q.steb_exceeds_half_distance);
+    }
+
+    #[test]
+    fn zero_distance_and_distance_below_steb_give_slowest_beta() {
+        for d in [0.0, 0.1, 0.399] {
+            let q = query_planner_control(&table(), Some(d));
+            assert_eq!((q.beta, q.row), (0.5, 0), "d_obs {d}");
+            assert!((q.dteb_radius - 0.2).abs() < 1e-12);
+            assert!(q.steb_exceeds_half_distance);
+        }
+    }
+
+    #[test]
+    fn largest_fitting_beta_is_chosen_never_a_larger_one() {
+        // d/2 = 0.75: levels 0.2..0.7 fit (k = 0..5), 0.8 does not.
+        let q = query_planner_control(&table(), Some(1.5));
+        assert!((q.beta - 0.75).abs() < 1e-12 && (q.dteb_radius - 0.7).abs() < 1e-9, "{q:?}");
+        // Exactly on a level: that row fits.
+        let q = query_planner_control(&table(), Some(1.6));
+        assert!((q.beta - 0.8).abs() < 1e-12, "{q:?}");
+        assert!(!q.steb_exceeds_half_distance);
+    }
+
+    #[test]
+    fn a_raised_level_raises_the_radius() {
+        let mut rows = table();
+        rows[0].level = 0.3;
+        let q = query_planner_control(&rows, Some(0.5));
+        assert!(q.steb_exceeds_half_distance && (q.steb_radius - 0.3).abs() < 1e-12);
+    }
+
+    #[test]
+    fn row_for_rounds_up_to_the_next_table_beta() {
+        let rows = table();
+        assert_eq!(row_for(&rows, 0.5), Some(0));
+        assert_eq!(row_for(&rows, 0.51), Some(1));
+        assert_eq!(row_for(&rows, 1.3), None);
+    }
+}
