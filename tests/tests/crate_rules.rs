@@ -76,3 +76,14 @@ fn the_trainer_reads_solution_files_not_the_solver() {
     assert!(!deps.contains("fastrack-grid"), "the trainer depends on the grid solver: {deps:?}");
     assert_excludes(&lock(), "fastrack-gridfile", &["fastrack-grid", "indicatif", "clap"]);
 }
+
+#[test]
+fn the_online_loop_links_only_what_a_robot_needs() {
+    let lock = lock();
+    assert_excludes(
+        &lock,
+        "fastrack-online",
+        &["ort", "clap", "indicatif", "fastrack-valuefn", "fastrack-sim", "plotters"],
+    );
+    assert!(closure(&lock, "fastrack-online").contains("fastrack-client"));
+}

@@ -1,0 +1,457 @@
+//! `fastrack sim`: the navigation simulator against the server: `run` (one world, one method, a summary and
+//! figures), `bench` (seeded worlds x methods, the paper's Table 1, a record), `fleet` (many robots on one
+//! server at once) and `world` (generate or check a world file).
+
+use super::{print, Server};
+use anyhow::Context as _;
+use fastrack_client::{model_ref, FastrackClient};
+use fastrack_proto::planner_speed::SpeedRow;
+use fastrack_sim::bench::{paper_comparison, summarise, summary_json, table, time_ratio, Summary};
+use fastrack_sim::episode::{run, Outcome, Run, RunSettings};
+use fastrack_sim::methods::Method;
+use fastrack_sim::plot::{methods_on_one_world, over_time, trajectory};
+use fastrack_sim::tracker::Disturbance;
+use fastrack_sim::world::{World, WorldSpec};
+use fastrack_valuefn::record::write_record;
+use indicatif::{ProgressBar, ProgressStyle};
+use serde_json::json;
+use std::path::PathBuf;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+use tokio::sync::Semaphore;
+
+/// Arguments of `fastrack sim`.
+#[derive(clap::Args)]
+pub struct Args {
+    #[command(subcommand)]
+    command: SimCommand,
+}
+
+#[derive(clap::Subcommand)]
+enum SimCommand {
+    /// One world, one method: prints the run's summary and writes its figures.
+    Run(RunArgs),
+    /// Seeded worlds x methods: the paper's Table 1 beside ours, a record and figures.
+    Bench(BenchArgs),
+    /// Parametric FaSTrack robots on seeded worlds, all at once on one server: ticks/s and latency.
+    Fleet(FleetArgs),
+    /// Generates a world from a seed, or checks a world file.
+    World(WorldArgs),
+}
+
+/// Settings every simulated run shares.
+#[derive(clap::Args)]
+struct Simulation {
+    /// Model name.
+    #[arg(long, default_value = "dubins4d")]
+    model: String,
+    /// Control period (s); default: the verification step recorded in the model's manifest.
+    #[arg(long)]
+    control_period: Option<f64>,
+    /// RK4 sub-steps per control period (collisions and the bound are checked at each).
+    #[arg(long, default_value_t = 4)]
+    substeps: usize,
+    /// A run that has not reached the goal by then is stopped (s).
+    #[arg(long, default_value_t = 120.0)]
+    time_limit: f64,
+    /// Sensing range (m); default: twice the dTEB at beta_u (the paper's assumption).
+    #[arg(long)]
+    sensor_range: Option<f64>,
+    /// A random push on the tracker's position of at most this many m/s per axis, which the model does not
+    /// know of (default none; the bounds are not guaranteed under it).
+    #[arg(long)]
+    disturbance: Option<f64>,
+}
+
+impl Simulation {
+    fn settings(&self, seed: u64) -> RunSettings {
+        RunSettings {
+            model: model_ref(&self.model, 0),
+            control_period: self.control_period,
+            substeps: self.substeps,
+            time_limit: self.time_limit,
+            sensor_range: self.sensor_range,
+            disturbance: self.disturbance.map(|bound| Disturbance { bound, period: 0.5 }),
+            seed,
+        }
+    }
+}
+
+/// How generated worlds look.
+#[derive(clap::Args)]
+struct Generation {
+    /// Workspace width and height (m).
+    #[arg(long, value_delimiter = ',', default_value = "30,20", num_args = 1)]
+    size: Vec<f64>,
+    /// Obstacles per 100 m^2.
+    #[arg(long, default_value_t = 2.0)]
+    density: f64,
+    /// Smallest and largest obstacle size (m): radius, half side, half length.
+    #[arg(long, value_delimiter = ',', default_value = "0.4,1.5", num_args = 1)]
+    size_range: Vec<f64>,
+}
+
+impl Generation {
+    fn spec(&self, seed: u64, inflation: f64) -> anyhow::Result<WorldSpec> {
+        let (&[w, h], &[lo, hi]) = (self.size.as_slice(), self.size_range.as_slice()) else {
+            anyhow::bail!("--size and --size-range take two numbers each, e.g. --size 30,20 --size-range 0.4,1.5");
+        };
+        Ok(WorldSpec {
+            seed,
+            size: [w, h],
+            density: self.density,
+            size_range: (lo, hi),
+            inflation,
+            ..WorldSpec::default()
+        })
+    }
+}
+
+#[derive(clap::Args)]
+struct RunArgs {
+    /// A world file (TOML or JSON); without it, a world generated from --seed.
+    #[arg(long)]
+    world: Option<PathBuf>,
+    /// Seed of the generated world (and of the method's randomness).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// pf, f-low, f-high, mf or mppi.
+    #[arg(long, default_value = "pf")]
+    method: String,
+    /// Where the trajectory figure goes (a second figure, over time, goes beside it).
+    #[arg(long, default_value = "target/sim/run.png")]
+    plot: PathBuf,
+    #[command(flatten)]
+    simulation: Simulation,
+    #[command(flatten)]
+    generation: Generation,
+}
+
+#[derive(clap::Args)]
+struct BenchArgs {
+    /// Seeded worlds (seeds 1..=N).
+    #[arg(long, default_value_t = 20)]
+    worlds: u64,
+    /// Methods, comma separated (pf, f-low, f-high, mf, mppi).
+    #[arg(long, value_delimiter = ',', default_value = "f-low,f-high,mf,pf,mppi")]
+    methods: Vec<String>,
+    /// Runs at once (each its own connection's stream or calls); decision latencies then include the
+    /// others' load on the machine.
+    #[arg(long, default_value_t = 1)]
+    jobs: usize,
+    /// Record name (`<results-dir>/<record>.{json,md}`, figures beside it); none without it.
+    #[arg(long)]
+    record: Option<String>,
+    /// Folder of measurement records and figures.
+    #[arg(long, default_value = "bench/results")]
+    results_dir: PathBuf,
+    #[command(flatten)]
+    simulation: Simulation,
+    #[command(flatten)]
+    generation: Generation,
+}
+
+#[derive(clap::Args)]
+struct FleetArgs {
+    /// Robots at once, each on its own seeded world and Track stream.
+    #[arg(long, value_delimiter = ',', default_value = "1,100")]
+    robots: Vec<usize>,
+    /// Record name; none without it.
+    #[arg(long)]
+    record: Option<String>,
+    /// Folder of measurement records.
+    #[arg(long, default_value = "bench/results")]
+    results_dir: PathBuf,
+    #[command(flatten)]
+    simulation: Simulation,
+    #[command(flatten)]
+    generation: Generation,
+}
+
+#[derive(clap::Args)]
+struct WorldArgs {
+    /// Check this world file (values, and a path for the model's sTEB) instead of generating one.
+    #[arg(long)]
+    check: Option<PathBuf>,
+    /// Seed of the generated world.
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// Where the generated world goes (TOML); printed without it.
+    #[arg(long)]
+    out: Option<PathBuf>,
+    /// Model whose sTEB the world must be feasible for.
+    #[arg(long, default_value = "dubins4d")]
+    model: String,
+    #[command(flatten)]
+    generation: Generation,
+}
+
+/// Runs `fastrack sim ...`.
+pub async fn run_command(server: &Server, args: Args, json_mode: bool) -> anyhow::Result<()> {
+    let client = server.connect().await?;
+    match args.command {
+        SimCommand::Run(args) => run_one(&client, args, json_mode).await,
+        SimCommand::Bench(args) => bench(&client, args, json_mode).await,
+        SimCommand::Fleet(args) => fleet(&client, args, json_mode).await,
+        SimCommand::World(args) => world(&client, args, json_mode).await,
+    }
+}
+
+/// The model's table as the planner-speed rules read it.
+async fn speeds(client: &FastrackClient, model: &str) -> anyhow::Result<Vec<SpeedRow>> {
+    let info = client.get_model(model_ref(model, 0)).await?;
+    let rows: Vec<SpeedRow> = info.teb_table.iter().map(SpeedRow::from).collect();
+    anyhow::ensure!(!rows.is_empty(), "model {model} has an empty TEB table");
+    Ok(rows)
+}
+
+/// The world of a run: the file, or the seed's generated world.
+fn world_of(file: Option<&PathBuf>, generation: &Generation, seed: u64, steb: f64) -> anyhow::Result<World> {
+    let world = match file {
+        Some(path) => World::load(path)?,
+        None => generation.spec(seed, steb)?.generate()?,
+    };
+    world.check_feasible(steb).context("the world is not feasible for the model's sTEB")?;
+    Ok(world)
+}
+
+fn run_line(run: &Run) -> String {
+    let mut decisions = run.decision_times.clone();
+    decisions.sort();
+    let p =
+        |q: f64| decisions.get(((q * decisions.len() as f64) as usize).min(decisions.len().saturating_sub(1))).copied();
+    format!(
+        "{}: {} after {:.2} s; min clearance {:.3} m; largest error - bound {}; replans {}, resets {}, server calls {}; decision p50 {:.3} ms, p99 {:.3} ms{}",
+        run.method,
+        run.outcome.label(),
+        run.time,
+        run.min_clearance,
+        run.worst_excess.map_or("-".into(), |e| format!("{e:.3} m")),
+        run.replans,
+        run.resets,
+        run.round_trips,
+        p(0.5).unwrap_or_default().as_secs_f64() * 1e3,
+        p(0.99).unwrap_or_default().as_secs_f64() * 1e3,
+        match &run.outcome {
+            Outcome::Failed(why) => format!(" ({why})"),
+            Outcome::BoundExceeded { error, bound } => format!(" (error {error:.3} m over the bound {bound:.3} m)"),
+            _ => String::new(),
+        }
+    )
+}
+
+async fn run_one(client: &FastrackClient, args: RunArgs, json_mode: bool) -> anyhow::Result<()> {
+    let table = speeds(client, &args.simulation.model).await?;
+    let world = world_of(args.world.as_ref(), &args.generation, args.seed, table[0].level)?;
+    let method = Method::parse(&args.method).map_err(anyhow::Error::msg)?;
+    let run = run(client, &world, &method, &args.simulation.settings(args.seed)).await?;
+    if let Some(dir) = args.plot.parent() {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    trajectory(&args.plot, &world, &run, table[0].beta, 2.0).map_err(anyhow::Error::msg)?;
+    let over = args.plot.with_extension("time.png");
+    over_time(&over, &run).map_err(anyhow::Error::msg)?;
+    print(
+        json_mode,
+        json!({"method": run.method, "outcome": run.outcome.label(), "time_s": run.time, "min_clearance_m": run.min_clearance,
+               "largest_error_minus_bound_m": run.worst_excess, "replans": run.replans, "resets": run.resets,
+               "server_calls": run.round_trips, "plot": args.plot, "plot_over_time": over}),
+        || format!("{}\nfigures: {} and {}", run_line(&run), args.plot.display(), over.display()),
+    );
+    anyhow::ensure!(!run.outcome.is_unsafe(), "the run was unsafe: {}", run.outcome.label());
+    Ok(())
+}
+
+async fn bench(client: &FastrackClient, args: BenchArgs, json_mode: bool) -> anyhow::Result<()> {
+    anyhow::ensure!(args.worlds > 0, "--worlds must be at least 1");
+    let table_rows = speeds(client, &args.simulation.model).await?;
+    let methods: Vec<Method> =
+        args.methods.iter().map(|m| Method::parse(m)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
+    let worlds: Vec<World> = (1..=args.worlds)
+        .map(|seed| world_of(None, &args.generation, seed, table_rows[0].level))
+        .collect::<anyhow::Result<_>>()?;
+    let bar = ProgressBar::new(args.worlds * methods.len() as u64).with_style(
+        ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} runs {msg}")?.progress_chars("=> "),
+    );
+    anyhow::ensure!(args.jobs > 0, "--jobs must be at least 1");
+    let started = Instant::now();
+    let slots = Arc::new(Semaphore::new(args.jobs));
+    let mut tasks = Vec::new();
+    for (w, world) in worlds.iter().enumerate() {
+        for (m, method) in methods.iter().enumerate() {
+            let (client, world, method, bar) = (client.clone(), world.clone(), method.clone(), bar.clone());
+            let (settings, slots) = (args.simulation.settings(w as u64 + 1), Arc::clone(&slots));
+            tasks.push(tokio::spawn(async move {
+                let _slot = slots.acquire_owned().await?;
+                let done = run(&client, &world, &method, &settings).await;
+                bar.set_message(format!("world {} {}", w + 1, method.label()));
+                bar.inc(1);
+                anyhow::Ok((m, done?))
+            }));
+        }
+    }
+    let mut runs: Vec<(usize, Run)> = Vec::with_capacity(tasks.len());
+    for task in tasks {
+        runs.push(task.await.context("a run's task failed")??);
+    }
+    bar.finish_and_clear();
+    let by_method = |m: usize| runs.iter().filter(|(i, _)| *i == m).map(|(_, r)| r).collect::<Vec<&Run>>();
+    let summaries: Vec<Summary> =
+        methods.iter().enumerate().map(|(m, method)| summarise(method.label(), &by_method(m))).collect();
+    let pf = methods.iter().position(|m| *m == Method::Parametric);
+    let ratios: Vec<(String, Option<(f64, usize)>)> = match pf {
+        Some(pf) => methods
+            .iter()
+            .enumerate()
+            .filter(|(m, _)| *m != pf)
+            .map(|(m, method)| (method.label().to_string(), time_ratio(&by_method(pf), &by_method(m))))
+            .collect(),
+        None => Vec::new(),
+    };
+    let ratio_text = ratios
+        .iter()
+        .map(|(label, r)| match r {
+            Some((ratio, n)) => format!("PF / {label} time to goal: {ratio:.3} over the {n} worlds both reached"),
+            None => format!("PF / {label}: no world both reached"),
+        })
+        .collect::<Vec<_>>()
+        .join("\n");
+    let ours = table(&summaries);
+    let paper = paper_comparison(&summaries);
+    if let Some(name) = &args.record {
+        let first_world: Vec<&Run> = runs.iter().take(methods.len()).map(|(_, r)| r).collect();
+        let figure = args.results_dir.join(format!("{name}-world1.png"));
+        std::fs::create_dir_all(&args.results_dir)?;
+        methods_on_one_world(&figure, &worlds[0], &first_world).map_err(anyhow::Error::msg)?;
+        let command = format!(
+            "fastrack sim bench --worlds {} --methods {} --jobs {} --record {name}",
+            args.worlds,
+            args.methods.join(","),
+            args.jobs
+        );
+        let path = write_record(
+            &args.results_dir,
+            name,
+            &command,
+            json!({"model": args.simulation.model, "worlds": args.worlds, "methods": args.methods, "jobs": args.jobs,
+                   "control_period_s": runs.first().map(|(_, r)| r.control_period), "substeps": args.simulation.substeps,
+                   "sensor_range_m": runs.first().map(|(_, r)| r.sensor_range), "time_limit_s": args.simulation.time_limit,
+                   "world": {"size": args.generation.size, "density": args.generation.density, "size_range": args.generation.size_range}}),
+            json!({"summaries": summaries.iter().map(summary_json).collect::<Vec<_>>(),
+                   "pf_time_ratios": ratios.iter().map(|(l, r)| json!({"against": l, "ratio": r.map(|x| x.0), "worlds": r.map(|x| x.1)})).collect::<Vec<_>>(),
+                   "paper_pf_over_f_ratio": 22.47 / 37.31, "wall_s": started.elapsed().as_secs_f64(), "figure": figure}),
+            &[("Ours", &ours), ("The paper's Table 1 beside ours", &paper)],
+        )?;
+        eprintln!("record: {}", path.display());
+    }
+    let failures: Vec<String> = summaries
+        .iter()
+        .filter(|s| s.method == "PF" && (s.collided > 0 || s.bound_exceeded > 0))
+        .map(|s| format!("PF: {} collisions, {} bounds exceeded in {} runs", s.collided, s.bound_exceeded, s.runs))
+        .collect();
+    print(json_mode, json!({"summaries": summaries.iter().map(summary_json).collect::<Vec<_>>()}), || {
+        format!("{}\n{}\n{ratio_text}", ours.to_markdown(), paper.to_markdown())
+    });
+    anyhow::ensure!(failures.is_empty(), "{}", failures.join("; "));
+    Ok(())
+}
+
+async fn fleet(client: &FastrackClient, args: FleetArgs, json_mode: bool) -> anyhow::Result<()> {
+    let table_rows = speeds(client, &args.simulation.model).await?;
+    let mut lines = Vec::new();
+    let mut figures = Vec::new();
+    for &robots in &args.robots {
+        anyhow::ensure!(robots > 0, "--robots takes counts of at least 1");
+        let worlds: Vec<World> = (1..=robots as u64)
+            .map(|seed| world_of(None, &args.generation, seed, table_rows[0].level))
+            .collect::<anyhow::Result<_>>()?;
+        let started = Instant::now();
+        let tasks: Vec<_> = worlds
+            .into_iter()
+            .enumerate()
+            .map(|(i, world)| {
+                let (client, settings) = (client.clone(), args.simulation.settings(i as u64 + 1));
+                tokio::spawn(async move { run(&client, &world, &Method::Parametric, &settings).await })
+            })
+            .collect();
+        let mut done = Vec::new();
+        for task in tasks {
+            done.push(task.await.context("a robot's task failed")??);
+        }
+        let wall = started.elapsed();
+        let ticks: usize = done.iter().map(|r| r.round_trips).sum();
+        let mut decisions: Vec<Duration> = done.iter().flat_map(|r| r.decision_times.iter().copied()).collect();
+        decisions.sort();
+        let p99 = decisions.get((0.99 * decisions.len() as f64) as usize).copied().unwrap_or_default();
+        let period = done.first().map_or(0.0, |r| r.control_period);
+        let slowest_rate = done
+            .iter()
+            .map(|r| r.decision_times.len() as f64 / r.decision_times.iter().sum::<Duration>().as_secs_f64().max(1e-9))
+            .fold(f64::INFINITY, f64::min);
+        let unsafe_runs = done.iter().filter(|r| r.outcome.is_unsafe()).count();
+        let real_time = slowest_rate >= 1.0 / period;
+        lines.push(format!(
+            "{robots} robots: {ticks} ticks in {:.2} s = {:.0} ticks/s; decision p99 {:.3} ms; the slowest robot decides {:.0} steps/s of its own time against {:.0} needed: {}; unsafe runs {unsafe_runs}",
+            wall.as_secs_f64(),
+            ticks as f64 / wall.as_secs_f64(),
+            p99.as_secs_f64() * 1e3,
+            slowest_rate,
+            1.0 / period,
+            if real_time { "holds its control period" } else { "misses its control period" }
+        ));
+        figures.push(json!({"robots": robots, "ticks": ticks, "wall_s": wall.as_secs_f64(), "ticks_per_s": ticks as f64 / wall.as_secs_f64(),
+            "decision_p99_ms": p99.as_secs_f64() * 1e3, "slowest_robot_steps_per_s": slowest_rate, "needed_steps_per_s": 1.0 / period,
+            "holds_control_period": real_time, "unsafe_runs": unsafe_runs}));
+        anyhow::ensure!(unsafe_runs == 0, "{unsafe_runs} of {robots} runs were unsafe");
+    }
+    if let Some(name) = &args.record {
+        let command = format!(
+            "fastrack sim fleet --robots {} --record {name}",
+            args.robots.iter().map(ToString::to_string).collect::<Vec<_>>().join(",")
+        );
+        let mut rows = fastrack_valuefn::record::Table::new(&[
+            "robots",
+            "ticks/s",
+            "decision p99 (ms)",
+            "holds its control period",
+        ]);
+        for f in &figures {
+            rows.row(vec![
+                f["robots"].to_string(),
+                format!("{:.0}", f["ticks_per_s"].as_f64().unwrap_or_default()),
+                format!("{:.3}", f["decision_p99_ms"].as_f64().unwrap_or_default()),
+                f["holds_control_period"].to_string(),
+            ]);
+        }
+        let path = write_record(
+            &args.results_dir,
+            name,
+            &command,
+            json!({"model": args.simulation.model}),
+            json!(figures),
+            &[("Fleet", &rows)],
+        )?;
+        eprintln!("record: {}", path.display());
+    }
+    print(json_mode, json!(figures), || lines.join("\n"));
+    Ok(())
+}
+
+async fn world(client: &FastrackClient, args: WorldArgs, json_mode: bool) -> anyhow::Result<()> {
+    let steb = speeds(client, &args.model).await?[0].level;
+    let world = world_of(args.check.as_ref(), &args.generation, args.seed, steb)?;
+    let text = world.to_toml();
+    match (&args.check, &args.out) {
+        (Some(path), _) => print(json_mode, json!({"world": path, "feasible_for_steb_m": steb}), || {
+            format!("{}: valid, and a path keeps the sTEB ({steb:.3} m) from every obstacle", path.display())
+        }),
+        (None, Some(out)) => {
+            std::fs::write(out, &text).with_context(|| format!("writing {}", out.display()))?;
+            print(json_mode, json!({"world": out, "obstacles": world.obstacles.len()}), || {
+                format!("{}: {} obstacles, feasible for the sTEB ({steb:.3} m)", out.display(), world.obstacles.len())
+            });
+        }
+        (None, None) => println!("{text}"),
+    }
+    Ok(())
+}

@@ -1,0 +1,13 @@
+//! The online half of Parametric FaSTrack as a library a robot's own stack can call every control step:
+//! [`online_loop::OnlineLoop`] runs the paper's Alg. 3 against the fastrack service over one `Track`
+//! stream, with any raw-path planner behind [`raw_path::RawPathPlanner`] (A* on a grid by default) and the
+//! obstacles of [`geometry`].
+
+pub mod geometry;
+pub mod online_loop;
+pub mod raw_path;
+
+/// The guide's example (`docs/online-loop.md`), compiled as a doctest so that it cannot drift from this crate.
+#[cfg(doctest)]
+#[doc = include_str!("../../docs/online-loop.md")]
+pub struct OnlineLoopGuide;

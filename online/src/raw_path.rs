@@ -1,0 +1,236 @@
+//! Raw-path planners: what the online loop asks for a path around the sensed obstacles, inflated by the
+//! sTEB. Any planner fits behind [`RawPathPlanner`]; the default is A* on a grid of the plane (the
+//! `pathfinding` crate) with the path shortened by line of sight.
+
+use crate::geometry::{clearance, norm, segment_is_free, sub, Obstacle, Point};
+use std::collections::VecDeque;
+
+/// What a planner is asked for.
+#[derive(Debug, Clone, Copy)]
+pub struct PlanRequest<'a> {
+    /// Where the path starts: the planner's current state.
+    pub start: Point,
+    /// Where it ends.
+    pub goal: Point,
+    /// The obstacles sensed so far.
+    pub obstacles: &'a [Obstacle],
+    /// How far the path must keep from every obstacle (the sTEB radius).
+    pub inflation: f64,
+    /// The workspace, `(min, max)` corners: the path stays inside.
+    pub bounds: (Point, Point),
+}
+
+/// A path that cannot be planned.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum PlanError {
+    /// The goal lies within the inflation of an obstacle or outside the workspace.
+    #[error("the goal {goal:?} is not free: it lies within {inflation} m of an obstacle or outside the workspace")]
+    GoalBlocked {
+        /// The goal.
+        goal: Point,
+        /// The inflation asked for.
+        inflation: f64,
+    },
+    /// No path keeps the inflation from every obstacle.
+    #[error("no path from {start:?} to {goal:?} keeps {inflation} m from every sensed obstacle")]
+    NoPath {
+        /// The start.
+        start: Point,
+        /// The goal.
+        goal: Point,
+        /// The inflation asked for.
+        inflation: f64,
+    },
+    /// The planner's own settings are unusable.
+    #[error("planner settings: {0}")]
+    Settings(String),
+}
+
+/// Plans raw paths: a list of planner states from the request's start to its goal, every segment keeping
+/// more than the inflation from every obstacle (the start may lie closer: the path leaves it).
+pub trait RawPathPlanner: Send {
+    /// A path from `request.start` to `request.goal`, both included.
+    fn plan(&mut self, request: &PlanRequest<'_>) -> Result<Vec<Point>, PlanError>;
+}
+
+/// A* over the cells of a grid of the plane (8-connected, octile costs), then shortened by line of sight:
+/// from each kept point, the farthest later point whose segment is free.
+#[derive(Debug, Clone, PartialEq)]
+pub struct GridAStar {
+    /// Cell size (m).
+    pub cell: f64,
+}
+
+impl Default for GridAStar {
+    fn default() -> Self {
+        Self { cell: 0.1 }
+    }
+}
+
+/// Grid costs are integers: micrometres.
+const COST_SCALE: f64 = 1e6;
+
+impl RawPathPlanner for GridAStar {
+    fn plan(&mut self, request: &PlanRequest<'_>) -> Result<Vec<Point>, PlanError> {
+        if !(self.cell.is_finite() && self.cell > 0.0) {
+            return Err(PlanError::Settings(format!("cell = {}; must be a finite size > 0", self.cell)));
+        }
+        let (lo, hi) = request.bounds;
+        let inside = |p: Point| p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1];
+        let free = |p: Point| inside(p) && clearance(request.obstacles, p) > request.inflation;
+        if !free(request.goal) {
+            return Err(PlanError::GoalBlocked { goal: request.goal, inflation: request.inflation });
+        }
+        let no_path = || PlanError::NoPath { start: request.start, goal: request.goal, inflation: request.inflation };
+        let columns = ((hi[0] - lo[0]) / self.cell).ceil() as i64 + 1;
+        let rows = ((hi[1] - lo[1]) / self.cell).ceil() as i64 + 1;
+        let centre = |(i, j): (i64, i64)| [lo[0] + i as f64 * self.cell, lo[1] + j as f64 * self.cell];
+        let cell_of =
+            |p: Point| (((p[0] - lo[0]) / self.cell).round() as i64, ((p[1] - lo[1]) / self.cell).round() as i64);
+        let (start, goal) = (cell_of(request.start), cell_of(request.goal));
+        // A start within the inflation (the planner's cell rounded towards an obstacle, or a planner the
+        // map grew around) is left by steps that strictly gain clearance, until a free cell is reached.
+        let gap = |p: Point| clearance(request.obstacles, p);
+        let step_free = |a: (i64, i64), b: (i64, i64)| {
+            if !(b.0 >= 0 && b.1 >= 0 && b.0 < columns && b.1 < rows) {
+                return false;
+            }
+            let (from, to) = (centre(a), centre(b));
+            if free(from) || a == goal {
+                (free(to) || b == goal) && segment_is_free(request.obstacles, from, to, request.inflation)
+            } else {
+                let here = gap(from);
+                inside(to) && gap(to) > here && segment_is_free(request.obstacles, from, to, here - 1e-9)
+            }
+        };
+        let octile = |a: (i64, i64), b: (i64, i64)| {
+            let (dx, dy) = ((a.0 - b.0).abs() as f64, (a.1 - b.1).abs() as f64);
+            ((dx.max(dy) + (std::f64::consts::SQRT_2 - 1.0) * dx.min(dy)) * self.cell * COST_SCALE) as u64
+        };
+        let successors = |&a: &(i64, i64)| {
+            let mut next = Vec::with_capacity(8);
+            for (di, dj) in [(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)] {
+                let b = (a.0 + di, a.1 + dj);
+                if step_free(a, b) {
+                    next.push((b, octile(a, b)));
+                }
+            }
+            next
+        };
+        let (cells, _) = pathfinding::directed::astar::astar(&start, successors, |&a| octile(a, goal), |&a| a == goal)
+            .ok_or_else(no_path)?;
+        let mut points: Vec<Point> = cells.iter().map(|&c| centre(c)).collect();
+        points[0] = request.start;
+        *points.last_mut().expect("a path holds its goal") = request.goal;
+        Ok(shortcut(&points, request.obstacles, request.inflation))
+    }
+}
+
+/// The path shortened by line of sight: from each kept point, the farthest later point whose segment keeps
+/// the inflation from every obstacle (the next point always qualifies, as the path's segments do).
+pub fn shortcut(points: &[Point], obstacles: &[Obstacle], inflation: f64) -> Vec<Point> {
+    let mut kept = vec![points[0]];
+    let mut i = 0;
+    while i + 1 < points.len() {
+        let j = (i + 1..points.len())
+            .rev()
+            .find(|&j| j == i + 1 || segment_is_free(obstacles, points[i], points[j], inflation))
+            .unwrap_or(i + 1);
+        kept.push(points[j]);
+        i = j;
+    }
+    kept
+}
+
+/// Moves a planner at `p` along `path` (the states ahead of it, consumed as they are reached) for one
+/// control period at per-axis speed at most `beta`, where `budget = beta dt`: a segment of direction `d` is
+/// crossed at speed `beta / max(|d_x|, |d_y|)`, so neither axis moves more than `budget`. Returns the new
+/// state (the last one when the path runs out).
+pub fn advance_along(p: Point, path: &mut VecDeque<Point>, budget: f64) -> Point {
+    let (mut p, mut remaining) = (p, budget);
+    while let Some(&next) = path.front() {
+        let delta = sub(next, p);
+        let per_axis = delta[0].abs().max(delta[1].abs());
+        if per_axis <= remaining {
+            remaining -= per_axis;
+            p = next;
+            path.pop_front();
+        } else {
+            let t = remaining / per_axis;
+            return [p[0] + t * delta[0], p[1] + t * delta[1]];
+        }
+    }
+    p
+}
+
+/// The length of a path.
+pub fn path_length(points: &[Point]) -> f64 {
+    points.windows(2).map(|w| norm(sub(w[1], w[0]))).sum()
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::geometry::{clearance, segment_is_free};
+
+    fn request<'a>(obstacles: &'a [Obstacle], inflation: f64) -> PlanRequest<'a> {
+        PlanRequest { start: [0.0, 0.0], goal: [10.0, 0.0], obstacles, inflation, bounds: ([-1.0, -6.0], [11.0, 6.0]) }
+    }
+
+    #[test]
+    fn an_open_plane_gives_the_straight_line() {
+        let path = GridAStar::default().plan(&request(&[], 0.5)).unwrap();
+        assert_eq!(path, vec![[0.0, 0.0], [10.0, 0.0]]);
+    }
+
+    #[test]
+    fn the_path_goes_around_an_obstacle_keeping_the_inflation() {
+        let obstacles = [Obstacle::Circle { center: [5.0, 0.0], radius: 1.0 }];
+        let path = GridAStar::default().plan(&request(&obstacles, 0.5)).unwrap();
+        for segment in path.windows(2) {
+            assert!(segment_is_free(&obstacles, segment[0], segment[1], 0.5), "{segment:?} cuts the inflated disc");
+        }
+        // Longer than the straight line, shorter than a wide detour (half a circle of radius 2: 6.3 + 6).
+        let length = path_length(&path);
+        assert!(length > 10.0 && length < 12.3, "length {length}: {path:?}");
+    }
+
+    #[test]
+    fn advancing_moves_no_axis_more_than_the_budget() {
+        let mut path: VecDeque<Point> = [[1.0, 0.0], [1.0, 2.0]].into();
+        // 0.5 along x first.
+        assert_eq!(advance_along([0.0, 0.0], &mut path, 0.5), [0.5, 0.0]);
+        // Across the corner: 0.5 to reach it, 0.25 up the next segment.
+        let p = advance_along([0.5, 0.0], &mut path, 0.75);
+        assert_eq!((p, path.len()), ([1.0, 0.25], 1));
+        // A diagonal segment: both axes at the budget.
+        let mut diagonal: VecDeque<Point> = [[2.0, 2.0]].into();
+        assert_eq!(advance_along([0.0, 0.0], &mut diagonal, 0.5), [0.5, 0.5]);
+        // The end of the path is where the planner stops.
+        let mut short: VecDeque<Point> = [[0.1, 0.0]].into();
+        assert_eq!((advance_along([0.0, 0.0], &mut short, 1.0), short.len()), ([0.1, 0.0], 0));
+    }
+
+    #[test]
+    fn a_start_within_the_inflation_is_left_by_gaining_clearance() {
+        // The start lies 0.3 m from the disc, inside the 0.5 m inflation: the path leaves it, never closing in.
+        let obstacles = [Obstacle::Circle { center: [0.0, -1.3], radius: 1.0 }];
+        let path = GridAStar::default().plan(&request(&obstacles, 0.5)).unwrap();
+        assert_eq!(path[0], [0.0, 0.0]);
+        let closest = path.windows(2).map(|w| obstacles[0].segment_distance(w[0], w[1])).fold(f64::INFINITY, f64::min);
+        assert!(closest >= 0.3 - 1e-9, "the path closes in on the obstacle: {closest} ({path:?})");
+        let escaped = path.iter().position(|&p| clearance(&obstacles, p) > 0.5).expect("the path leaves the inflation");
+        for segment in path[escaped..].windows(2) {
+            assert!(segment_is_free(&obstacles, segment[0], segment[1], 0.5), "{segment:?} after the escape");
+        }
+    }
+
+    #[test]
+    fn a_wall_across_the_workspace_or_a_blocked_goal_is_reported() {
+        let wall = [Obstacle::Wall { from: [5.0, -7.0], to: [5.0, 7.0], thickness: 0.2 }];
+        assert!(matches!(GridAStar::default().plan(&request(&wall, 0.3)), Err(PlanError::NoPath { .. })));
+        let on_goal = [Obstacle::Circle { center: [10.0, 0.2], radius: 0.5 }];
+        assert!(matches!(GridAStar::default().plan(&request(&on_goal, 0.3)), Err(PlanError::GoalBlocked { .. })));
+        assert!(matches!(GridAStar { cell: 0.0 }.plan(&request(&[], 0.3)), Err(PlanError::Settings(_))));
+    }
+}

@@ -1,0 +1,172 @@
+//! The benchmark of the paper's Table 1: every method through the same seeded worlds, summarised per
+//! method (reached, collisions, bounds exceeded, time to goal, clearance, replans, resets, ticks, decision
+//! latency), beside the paper's figures.
+
+use crate::episode::{Outcome, Run};
+use fastrack_valuefn::record::Table;
+use serde_json::{json, Value};
+use std::time::Duration;
+
+/// The paper's Table 1 (20 runs): reached %, collision %, solution time (s), by method label.
+pub const PAPER_TABLE: [(&str, f64, f64, f64); 4] = [
+    ("F(beta_l)", 100.0, 0.0, 37.31),
+    ("MF", 100.0, 0.0, 30.11),
+    ("PF", 100.0, 0.0, 22.47),
+    ("MPPI", 65.0, 35.0, 10.94),
+];
+
+/// One method's runs, summarised.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Summary {
+    /// The method.
+    pub method: &'static str,
+    /// Runs.
+    pub runs: usize,
+    /// Runs that reached the goal.
+    pub reached: usize,
+    /// Runs that hit an obstacle.
+    pub collided: usize,
+    /// Runs whose tracking error exceeded the bound in force.
+    pub bound_exceeded: usize,
+    /// Runs that timed out or whose method gave up.
+    pub other: usize,
+    /// Mean and standard deviation of the time to goal over the reached runs (s).
+    pub time_to_goal: Option<(f64, f64)>,
+    /// Smallest clearance over every run (m).
+    pub min_clearance: f64,
+    /// Largest `error - bound` over every run (m), for methods with a bound.
+    pub worst_excess: Option<f64>,
+    /// Mean replans, resets and server calls per run.
+    pub replans: f64,
+    /// Mean planner resets per run.
+    pub resets: f64,
+    /// Mean server calls per run.
+    pub round_trips: f64,
+    /// Median and 99th percentile of the decision time per control period.
+    pub decision_p50: Duration,
+    /// The 99th percentile.
+    pub decision_p99: Duration,
+}
+
+/// Summarises the runs of one method.
+pub fn summarise(method: &'static str, runs: &[&Run]) -> Summary {
+    let count = |f: &dyn Fn(&Outcome) -> bool| runs.iter().filter(|r| f(&r.outcome)).count();
+    let times: Vec<f64> = runs.iter().filter(|r| r.outcome == Outcome::Reached).map(|r| r.time).collect();
+    let time_to_goal = (!times.is_empty()).then(|| {
+        let mean = times.iter().sum::<f64>() / times.len() as f64;
+        let var = times.iter().map(|t| (t - mean) * (t - mean)).sum::<f64>() / times.len() as f64;
+        (mean, var.sqrt())
+    });
+    let mut decisions: Vec<Duration> = runs.iter().flat_map(|r| r.decision_times.iter().copied()).collect();
+    decisions.sort();
+    let rank = |q: f64| {
+        decisions.get(((q * decisions.len() as f64).ceil() as usize).clamp(1, decisions.len().max(1)) - 1).copied()
+    };
+    let mean = |f: &dyn Fn(&Run) -> usize| runs.iter().map(|r| f(r) as f64).sum::<f64>() / runs.len().max(1) as f64;
+    Summary {
+        method,
+        runs: runs.len(),
+        reached: count(&|o| *o == Outcome::Reached),
+        collided: count(&|o| *o == Outcome::Collided),
+        bound_exceeded: count(&|o| matches!(o, Outcome::BoundExceeded { .. })),
+        other: count(&|o| matches!(o, Outcome::TimedOut | Outcome::Failed(_))),
+        time_to_goal,
+        min_clearance: runs.iter().map(|r| r.min_clearance).fold(f64::INFINITY, f64::min),
+        worst_excess: runs.iter().filter_map(|r| r.worst_excess).reduce(f64::max),
+        replans: mean(&|r| r.replans),
+        resets: mean(&|r| r.resets),
+        round_trips: mean(&|r| r.round_trips),
+        decision_p50: rank(0.5).unwrap_or_default(),
+        decision_p99: rank(0.99).unwrap_or_default(),
+    }
+}
+
+fn percent(part: usize, whole: usize) -> f64 {
+    100.0 * part as f64 / whole.max(1) as f64
+}
+
+/// The summaries as a markdown table.
+pub fn table(summaries: &[Summary]) -> Table {
+    let mut table = Table::new(&[
+        "method",
+        "runs",
+        "reached %",
+        "collision %",
+        "bound exceeded %",
+        "timed out / gave up %",
+        "time to goal (s, mean ± sd)",
+        "min clearance (m)",
+        "largest error - bound (m)",
+        "replans",
+        "resets",
+        "server calls",
+        "decision p50 / p99 (ms)",
+    ]);
+    for s in summaries {
+        table.row(vec![
+            s.method.to_string(),
+            s.runs.to_string(),
+            format!("{:.0}", percent(s.reached, s.runs)),
+            format!("{:.0}", percent(s.collided, s.runs)),
+            format!("{:.0}", percent(s.bound_exceeded, s.runs)),
+            format!("{:.0}", percent(s.other, s.runs)),
+            s.time_to_goal.map_or("-".into(), |(m, sd)| format!("{m:.2} ± {sd:.2}")),
+            format!("{:.3}", s.min_clearance),
+            s.worst_excess.map_or("-".into(), |e| format!("{e:.3}")),
+            format!("{:.1}", s.replans),
+            format!("{:.1}", s.resets),
+            format!("{:.0}", s.round_trips),
+            format!("{:.3} / {:.3}", s.decision_p50.as_secs_f64() * 1e3, s.decision_p99.as_secs_f64() * 1e3),
+        ]);
+    }
+    table
+}
+
+/// The paper's Table 1 beside ours: reached %, collision % and time to goal per method.
+pub fn paper_comparison(summaries: &[Summary]) -> Table {
+    let mut table =
+        Table::new(&["method", "paper: reached %", "ours", "paper: collision %", "ours", "paper: time (s)", "ours"]);
+    for s in summaries {
+        let paper = PAPER_TABLE.iter().find(|p| p.0 == s.method);
+        let cell = |f: fn(&(&str, f64, f64, f64)) -> f64, digits: usize| {
+            paper.map_or("-".into(), |p| format!("{:.*}", digits, f(p)))
+        };
+        table.row(vec![
+            s.method.to_string(),
+            cell(|p| p.1, 0),
+            format!("{:.0}", percent(s.reached, s.runs)),
+            cell(|p| p.2, 0),
+            format!("{:.0}", percent(s.collided, s.runs)),
+            cell(|p| p.3, 2),
+            s.time_to_goal.map_or("-".into(), |(m, _)| format!("{m:.2}")),
+        ]);
+    }
+    table
+}
+
+/// PF's mean time to goal over another method's, on the worlds both reached (the paper: 22.47 / 37.31 = 0.60
+/// against FaSTrack).
+pub fn time_ratio(pf: &[&Run], other: &[&Run]) -> Option<(f64, usize)> {
+    let pairs: Vec<(f64, f64)> = pf
+        .iter()
+        .zip(other)
+        .filter(|(a, b)| a.outcome == Outcome::Reached && b.outcome == Outcome::Reached)
+        .map(|(a, b)| (a.time, b.time))
+        .collect();
+    (!pairs.is_empty()).then(|| {
+        let (a, b) = pairs.iter().fold((0.0, 0.0), |(x, y), (a, b)| (x + a, y + b));
+        (a / b, pairs.len())
+    })
+}
+
+/// A summary's figures as JSON.
+pub fn summary_json(s: &Summary) -> Value {
+    json!({
+        "method": s.method, "runs": s.runs, "reached": s.reached, "collided": s.collided,
+        "bound_exceeded": s.bound_exceeded, "timed_out_or_gave_up": s.other,
+        "time_to_goal_mean_s": s.time_to_goal.map(|t| t.0), "time_to_goal_sd_s": s.time_to_goal.map(|t| t.1),
+        "min_clearance_m": s.min_clearance, "largest_error_minus_bound_m": s.worst_excess,
+        "replans_mean": s.replans, "resets_mean": s.resets, "server_calls_mean": s.round_trips,
+        "decision_p50_ms": s.decision_p50.as_secs_f64() * 1e3, "decision_p99_ms": s.decision_p99.as_secs_f64() * 1e3,
+    })
+}

@@ -1,0 +1,280 @@
+//! One run of one method through one world: sense, decide, integrate the true dynamics over the control
+//! period in sub-steps, and at every sub-step check the true map for a collision and the tracking error
+//! against the bound in force. A collision or an error beyond the bound ends the run as a failure.
+
+use crate::methods::{Context, Controller, Method, MethodError};
+use crate::tracker::{Disturbance, RangeSensor, Tracker};
+use crate::world::World;
+use fastrack_client::{pb, FastrackClient};
+use fastrack_online::geometry::{clearance, norm, sub, Point};
+use fastrack_proto::planner_speed::SpeedRow;
+use rand::rngs::StdRng;
+use rand::SeedableRng;
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+/// How a run is simulated.
+#[derive(Debug, Clone, PartialEq)]
+pub struct RunSettings {
+    /// The model.
+    pub model: pb::ModelRef,
+    /// Control period (s); `None`: the verification step recorded in the model's manifest.
+    pub control_period: Option<f64>,
+    /// RK4 sub-steps per control period.
+    pub substeps: usize,
+    /// The run stops, not reached, after this long (s).
+    pub time_limit: f64,
+    /// Sensing range (m); `None`: twice the dTEB at `beta_u`, the paper's assumption.
+    pub sensor_range: Option<f64>,
+    /// A push on the tracker the model does not know of (none by default).
+    pub disturbance: Option<Disturbance>,
+    /// Seed of the method's and the disturbance's randomness.
+    pub seed: u64,
+}
+
+impl Default for RunSettings {
+    fn default() -> Self {
+        Self {
+            model: pb::ModelRef { name: "dubins4d".into(), version: 0 },
+            control_period: None,
+            substeps: 4,
+            time_limit: 120.0,
+            sensor_range: None,
+            disturbance: None,
+            seed: 1,
+        }
+    }
+}
+
+/// How a run ended.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Outcome {
+    /// The tracker reached the goal.
+    Reached,
+    /// The tracker hit an obstacle of the true map.
+    Collided,
+    /// The tracking error exceeded the bound in force.
+    BoundExceeded {
+        /// The error (m).
+        error: f64,
+        /// The bound (m).
+        bound: f64,
+    },
+    /// The time limit passed.
+    TimedOut,
+    /// The method gave up (no path, no reset point, the server failed).
+    Failed(String),
+}
+
+impl Outcome {
+    /// A failure of safety: a collision or a bound exceeded.
+    pub fn is_unsafe(&self) -> bool {
+        matches!(self, Outcome::Collided | Outcome::BoundExceeded { .. })
+    }
+
+    /// A short word for tables.
+    pub fn label(&self) -> &'static str {
+        match self {
+            Outcome::Reached => "reached",
+            Outcome::Collided => "collided",
+            Outcome::BoundExceeded { .. } => "bound exceeded",
+            Outcome::TimedOut => "timed out",
+            Outcome::Failed(_) => "failed",
+        }
+    }
+}
+
+/// The state of the run after one control period.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Sample {
+    /// Time at the end of the period (s).
+    pub t: f64,
+    /// Tracker position.
+    pub position: Point,
+    /// Planner position, if the method has a planner.
+    pub planner: Option<Point>,
+    /// Planner speed bound.
+    pub beta: Option<f64>,
+    /// Bound in force.
+    pub bound: Option<f64>,
+    /// Largest tracking error over the period's sub-steps.
+    pub error: Option<f64>,
+    /// Smallest distance to the true map over the period's sub-steps.
+    pub clearance: f64,
+    /// Obstacles sensed at the period's start.
+    pub sensed: usize,
+}
+
+/// A finished run.
+#[derive(Debug, Clone)]
+pub struct Run {
+    /// The method's label.
+    pub method: &'static str,
+    /// How it ended.
+    pub outcome: Outcome,
+    /// Time when it ended (s): the time to goal when reached.
+    pub time: f64,
+    /// One sample per control period.
+    pub samples: Vec<Sample>,
+    /// Smallest distance to an obstacle of the true map over the run (m).
+    pub min_clearance: f64,
+    /// Largest `error - bound` over the run (m; negative when the error stayed inside).
+    pub worst_excess: Option<f64>,
+    /// Raw paths planned.
+    pub replans: usize,
+    /// Planner resets.
+    pub resets: usize,
+    /// Calls to the server (ticks or unary calls).
+    pub round_trips: usize,
+    /// The method's decision time per control period, server calls included.
+    pub decision_times: Vec<Duration>,
+    /// The sensing range used (m).
+    pub sensor_range: f64,
+    /// The sTEB radius (m).
+    pub steb_radius: f64,
+    /// The control period used (s).
+    pub control_period: f64,
+    /// The planner's raw path at the end.
+    pub final_path: Vec<Point>,
+}
+
+/// Runs `method` through `world` against the server.
+pub async fn run(
+    client: &FastrackClient,
+    world: &World,
+    method: &Method,
+    settings: &RunSettings,
+) -> Result<Run, MethodError> {
+    let info = client.get_model(settings.model.clone()).await?;
+    let system = fastrack_valuefn::system::for_bundle(&info.system, info.params.len())
+        .ok_or_else(|| MethodError::Setup(format!("the simulator has no dynamics for system `{}`", info.system)))?;
+    let tracker = Arc::new(Tracker::new(system).map_err(MethodError::Setup)?);
+    let speeds: Vec<SpeedRow> = info.teb_table.iter().map(SpeedRow::from).collect();
+    let (steb, fastest) = match (speeds.first(), speeds.last()) {
+        (Some(first), Some(last)) => (first.level, last.level),
+        _ => return Err(MethodError::Setup("the model's TEB table is empty".into())),
+    };
+    let control_period = match settings.control_period {
+        Some(dt) => dt,
+        None => verification_step(&info)?,
+    };
+    if !(control_period.is_finite() && control_period > 0.0 && settings.substeps > 0) {
+        return Err(MethodError::Setup(format!(
+            "control period {control_period} s and {} sub-steps",
+            settings.substeps
+        )));
+    }
+    let sensor = RangeSensor { range: settings.sensor_range.unwrap_or(2.0 * fastest) };
+    let context = Context {
+        client: client.clone(),
+        model: settings.model.clone(),
+        speeds,
+        n_params: info.params.len(),
+        tracker: Arc::clone(&tracker),
+        world: Arc::new(world.clone()),
+        control_period,
+        seed: settings.seed,
+    };
+    let mut s = tracker
+        .initial_state(world.start, &[("theta", world.start_heading), ("v", world.start_speed)])
+        .map_err(MethodError::Setup)?;
+    let mut controller = Controller::start(method, context, &s).await?;
+    let mut rng = StdRng::seed_from_u64(settings.seed ^ 0xD15_7A6B);
+    let mut run = Run {
+        method: method.label(),
+        outcome: Outcome::TimedOut,
+        time: 0.0,
+        samples: Vec::new(),
+        min_clearance: clearance(&world.obstacles, world.start),
+        worst_excess: None,
+        replans: 0,
+        resets: 0,
+        round_trips: 0,
+        decision_times: Vec::new(),
+        sensor_range: sensor.range,
+        steb_radius: steb,
+        control_period,
+        final_path: Vec::new(),
+    };
+    let steps = (settings.time_limit / control_period).ceil() as usize;
+    let mut push = [0.0, 0.0];
+    for k in 0..steps {
+        let t = k as f64 * control_period;
+        let position = tracker.position(&s);
+        if norm(sub(position, world.goal)) <= world.goal_radius {
+            run.outcome = Outcome::Reached;
+            run.time = t;
+            break;
+        }
+        let sensed = sensor.sense(&world.obstacles, position);
+        let started = Instant::now();
+        let decision = match controller.step(&s, &sensed).await {
+            Ok(decision) => decision,
+            Err(e) => {
+                run.outcome = Outcome::Failed(e.to_string());
+                run.time = t;
+                break;
+            }
+        };
+        run.decision_times.push(started.elapsed());
+        run.replans += usize::from(decision.replanned);
+        run.resets += usize::from(decision.reset);
+        run.round_trips += decision.round_trips;
+        if let Some(disturbance) = &settings.disturbance {
+            if (t / disturbance.period).floor() != ((t - control_period) / disturbance.period).floor() || k == 0 {
+                push = disturbance.draw(&mut rng);
+            }
+        }
+        let (mut period_clearance, mut period_error) = (f64::INFINITY, None::<f64>);
+        let mut failure = None;
+        tracker.step(&mut s, &decision.control, push, control_period, settings.substeps, |x| {
+            let p = tracker.position(x);
+            let gap = clearance(&world.obstacles, p);
+            period_clearance = period_clearance.min(gap);
+            if gap <= 0.0 {
+                failure = Some(Outcome::Collided);
+                return false;
+            }
+            if let (Some(planner), Some(bound)) = (decision.planner, decision.bound) {
+                let error = tracker.tracking_error(x, planner);
+                period_error = Some(period_error.map_or(error, |e| e.max(error)));
+                let excess = error - bound;
+                run.worst_excess = Some(run.worst_excess.map_or(excess, |w| w.max(excess)));
+                if excess > 1e-9 {
+                    failure = Some(Outcome::BoundExceeded { error, bound });
+                    return false;
+                }
+            }
+            true
+        });
+        run.min_clearance = run.min_clearance.min(period_clearance);
+        run.samples.push(Sample {
+            t: t + control_period,
+            position: tracker.position(&s),
+            planner: decision.planner,
+            beta: decision.beta,
+            bound: decision.bound,
+            error: period_error,
+            clearance: period_clearance,
+            sensed: sensed.len(),
+        });
+        if let Some(outcome) = failure {
+            run.outcome = outcome;
+            run.time = t + control_period;
+            break;
+        }
+        run.time = t + control_period;
+    }
+    run.final_path = controller.raw_path();
+    Ok(run)
+}
+
+/// The integration step the model's verification used (every verified row records it).
+fn verification_step(info: &pb::ModelInfo) -> Result<f64, MethodError> {
+    let manifest: serde_json::Value = serde_json::from_str(&info.manifest_json)
+        .map_err(|e| MethodError::Setup(format!("the model's manifest does not parse: {e}")))?;
+    manifest["teb_table"]
+        .as_array()
+        .and_then(|rows| rows.iter().find_map(|row| row["verification"]["step"].as_f64()))
+        .ok_or_else(|| MethodError::Setup("the model is not verified: give the control period".into()))
+}

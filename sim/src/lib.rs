@@ -1,0 +1,12 @@
+//! A 2-D navigation simulator around the fastrack service, for the online half of Parametric FaSTrack:
+//! [`world`]s from files or seeds, the tracker's true dynamics and a range sensor ([`tracker`]), the
+//! methods compared ([`methods`]: Parametric FaSTrack over the `Track` stream, FaSTrack at fixed speeds,
+//! Meta-FaSTrack, MPPI), one run of a method through a world ([`episode`]), the benchmark's summaries
+//! ([`bench`]) and the figures ([`plot`]).
+
+pub mod bench;
+pub mod episode;
+pub mod methods;
+pub mod plot;
+pub mod tracker;
+pub mod world;

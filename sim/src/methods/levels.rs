@@ -1,0 +1,136 @@
+//! FaSTrack at fixed planner speeds: one level (classic FaSTrack, obstacles inflated by that row's bound), or
+//! several (Meta-FaSTrack, after Fridovich-Keil et al., ICRA 2018): at every replan the fastest level whose
+//! inflated map admits a path is chosen; a faster level is taken at once (its bound contains the slower
+//! one's), a slower one only once the relative state lies inside that level's bound, the planner holding
+//! still until then. The control comes from `TrackingControl` at the level's `beta`; checking a pending
+//! switch and reading the control share one call.
+
+use super::{Context, Decision, MethodError};
+use fastrack_client::pb;
+use fastrack_online::geometry::{remember, Obstacle, Point};
+use fastrack_online::raw_path::{advance_along, GridAStar, PlanError, PlanRequest, RawPathPlanner};
+use fastrack_proto::planner_speed::SpeedRow;
+use std::collections::VecDeque;
+
+/// FaSTrack over fixed levels, running.
+pub struct LevelPlanner {
+    context: Context,
+    /// The levels, slowest first: table rows.
+    levels: Vec<SpeedRow>,
+    /// The level in use.
+    current: usize,
+    /// A slower level waiting for the tracker to enter its bound, with its path.
+    pending: Option<(usize, VecDeque<Point>)>,
+    planner: Point,
+    path: VecDeque<Point>,
+    obstacles: Vec<Obstacle>,
+    replan: bool,
+    path_planner: GridAStar,
+}
+
+impl LevelPlanner {
+    /// The levels `rows` (indices into the model's table, slowest first) with the planner at `start`; the
+    /// fastest level first.
+    pub fn new(context: Context, rows: Vec<usize>, start: Point) -> Self {
+        let levels: Vec<SpeedRow> = rows.iter().map(|&i| context.speeds[i]).collect();
+        Self {
+            current: levels.len() - 1,
+            levels,
+            context,
+            pending: None,
+            planner: start,
+            path: VecDeque::new(),
+            obstacles: Vec::new(),
+            replan: true,
+            path_planner: GridAStar::default(),
+        }
+    }
+
+    /// The raw path ahead of the planner.
+    pub fn raw_path(&self) -> Vec<Point> {
+        self.path.iter().copied().collect()
+    }
+
+    /// A path at `level`'s inflation from the planner's state.
+    fn plan(&mut self, level: usize) -> Result<VecDeque<Point>, PlanError> {
+        let request = PlanRequest {
+            start: self.planner,
+            goal: self.context.world.goal,
+            obstacles: &self.obstacles,
+            inflation: self.levels[level].level,
+            bounds: self.context.world.bounds(),
+        };
+        Ok(self.path_planner.plan(&request)?.into_iter().skip(1).collect())
+    }
+
+    /// `TrackingControl` for relative states `states[i]` at the speed of level `levels[i]`.
+    async fn controls(&self, states: &[&[f64]], levels: &[usize]) -> Result<pb::TrackingControlResponse, MethodError> {
+        let flat = states.iter().flat_map(|r| r.iter().copied()).collect();
+        let params = levels
+            .iter()
+            .flat_map(|&level| std::iter::repeat_n(self.levels[level].beta, self.context.n_params))
+            .collect();
+        Ok(self
+            .context
+            .client
+            .tracking_control(self.context.model.clone(), flat, params, pb::OutOfDomainPolicy::Flag)
+            .await?)
+    }
+
+    /// One control period.
+    pub async fn step(&mut self, tracker: &[f64], sensed: &[Obstacle]) -> Result<Decision, MethodError> {
+        let replanned = remember(&mut self.obstacles, sensed) || self.replan;
+        if replanned {
+            self.replan = false;
+            let mut chosen = None;
+            for level in (0..self.levels.len()).rev() {
+                match self.plan(level) {
+                    Ok(path) => {
+                        chosen = Some((level, path));
+                        break;
+                    }
+                    Err(PlanError::NoPath { .. } | PlanError::GoalBlocked { .. }) if level > 0 => continue,
+                    Err(e) => return Err(e.into()),
+                }
+            }
+            let (level, path) = chosen.ok_or_else(|| MethodError::Setup("no levels to plan with".into()))?;
+            if level >= self.current {
+                (self.current, self.path, self.pending) = (level, path, None);
+            } else {
+                self.pending = Some((level, path));
+            }
+        }
+        let (p_next, control) = match self.pending.take() {
+            // Hold the planner and steer with the pending level's control, which drives the relative state
+            // towards that level's set; the current level's bound stays in force until the state is inside.
+            // Under the current level's own control a Dubins car circles a still planner outside the
+            // smaller set and the switch never happens.
+            Some((level, path)) => {
+                let r = self.context.tracker.relative_state(tracker, self.planner);
+                let answer = self.controls(&[&r], &[level]).await?;
+                if answer.in_teb[0] {
+                    (self.current, self.path) = (level, path);
+                } else {
+                    self.pending = Some((level, path));
+                }
+                (self.planner, answer.controls)
+            }
+            None => {
+                let budget = self.levels[self.current].beta * self.context.control_period;
+                let p_next = advance_along(self.planner, &mut self.path, budget);
+                let r = self.context.tracker.relative_state(tracker, p_next);
+                (p_next, self.controls(&[&r], &[self.current]).await?.controls)
+            }
+        };
+        self.planner = p_next;
+        Ok(Decision {
+            control,
+            planner: Some(p_next),
+            beta: Some(self.levels[self.current].beta),
+            bound: Some(self.levels[self.current].level),
+            replanned,
+            reset: false,
+            round_trips: 1,
+        })
+    }
+}

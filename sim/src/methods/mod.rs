@@ -1,0 +1,178 @@
+//! The navigation methods the simulator compares, on the same worlds, sensor, dynamics and control period:
+//! Parametric FaSTrack over the `Track` stream, FaSTrack at a fixed `beta`, Meta-FaSTrack over a few fixed
+//! levels, and MPPI on the tracker's dynamics with no bound.
+
+mod levels;
+mod mppi;
+mod parametric;
+
+pub use levels::LevelPlanner;
+pub use mppi::{Mppi, MppiSettings};
+pub use parametric::Parametric;
+
+use crate::tracker::Tracker;
+use crate::world::World;
+use fastrack_client::{pb, FastrackClient};
+use fastrack_online::geometry::{Obstacle, Point};
+use fastrack_proto::planner_speed::SpeedRow;
+use std::sync::Arc;
+
+/// Which method drives the robot.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Method {
+    /// Parametric FaSTrack (the paper's Alg. 3), `PF`.
+    Parametric,
+    /// FaSTrack at the slowest table `beta` (obstacles inflated by its bound), `F(beta_l)`.
+    FastrackSlowest,
+    /// FaSTrack at the fastest table `beta`, `F(beta_u)`.
+    FastrackFastest,
+    /// Meta-FaSTrack over `levels` table rows spread evenly from `beta_l` to `beta_u`, `MF`.
+    MetaFastrack {
+        /// How many levels (at least 2).
+        levels: usize,
+    },
+    /// MPPI on the tracker's dynamics with the sensed obstacles in its cost and no bound.
+    Mppi(MppiSettings),
+}
+
+impl Method {
+    /// The five methods of the benchmark, with their default settings.
+    pub fn all() -> Vec<Method> {
+        vec![
+            Method::FastrackSlowest,
+            Method::FastrackFastest,
+            Method::MetaFastrack { levels: 3 },
+            Method::Parametric,
+            Method::Mppi(MppiSettings::default()),
+        ]
+    }
+
+    /// Short name, as in the paper's Table 1.
+    pub fn label(&self) -> &'static str {
+        match self {
+            Method::Parametric => "PF",
+            Method::FastrackSlowest => "F(beta_l)",
+            Method::FastrackFastest => "F(beta_u)",
+            Method::MetaFastrack { .. } => "MF",
+            Method::Mppi(_) => "MPPI",
+        }
+    }
+
+    /// The method for a name given on the command line: `pf`, `f-low`, `f-high`, `mf`, `mppi`.
+    pub fn parse(name: &str) -> Result<Method, String> {
+        match name {
+            "pf" => Ok(Method::Parametric),
+            "f-low" => Ok(Method::FastrackSlowest),
+            "f-high" => Ok(Method::FastrackFastest),
+            "mf" => Ok(Method::MetaFastrack { levels: 3 }),
+            "mppi" => Ok(Method::Mppi(MppiSettings::default())),
+            other => Err(format!("unknown method `{other}`; expected pf, f-low, f-high, mf or mppi")),
+        }
+    }
+}
+
+/// What a method decided for one control period.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Decision {
+    /// The control held over the period.
+    pub control: Vec<f64>,
+    /// The planner state the tracker follows (`None`: no planner, MPPI).
+    pub planner: Option<Point>,
+    /// The planner speed bound in use.
+    pub beta: Option<f64>,
+    /// The tracking error bound in force over the period (`None`: none, MPPI).
+    pub bound: Option<f64>,
+    /// The raw path was planned again.
+    pub replanned: bool,
+    /// The planner was reset (Parametric FaSTrack's adjustPlannerControl).
+    pub reset: bool,
+    /// Calls to the server this period.
+    pub round_trips: usize,
+}
+
+/// Why a method cannot go on.
+#[derive(Debug, thiserror::Error)]
+pub enum MethodError {
+    /// The online loop failed (server, planner, no reset point).
+    #[error(transparent)]
+    Loop(#[from] fastrack_online::online_loop::LoopError),
+    /// A call to the server failed.
+    #[error(transparent)]
+    Client(#[from] fastrack_client::ClientError),
+    /// No raw path exists at the method's inflation.
+    #[error(transparent)]
+    Plan(#[from] fastrack_online::raw_path::PlanError),
+    /// The method cannot run on this model.
+    #[error("{0}")]
+    Setup(String),
+}
+
+/// What every method knows of the model and the run.
+#[derive(Clone)]
+pub struct Context {
+    /// A connection to the server.
+    pub client: FastrackClient,
+    /// The model.
+    pub model: pb::ModelRef,
+    /// Its TEB table as the planner-speed rules read it.
+    pub speeds: Vec<SpeedRow>,
+    /// How many parameters an item carries (every one set to `beta`).
+    pub n_params: usize,
+    /// The simulated tracker (dynamics, relative states).
+    pub tracker: Arc<Tracker>,
+    /// The world's goal and workspace.
+    pub world: Arc<World>,
+    /// Control period (s).
+    pub control_period: f64,
+    /// Seed of the method's own randomness.
+    pub seed: u64,
+}
+
+/// A running method.
+pub enum Controller {
+    /// Parametric FaSTrack.
+    Parametric(Box<Parametric>),
+    /// FaSTrack or Meta-FaSTrack.
+    Levels(Box<LevelPlanner>),
+    /// MPPI.
+    Mppi(Box<Mppi>),
+}
+
+impl Controller {
+    /// Starts `method` with the tracker at `tracker` (the planner starts at the tracker's position).
+    pub async fn start(method: &Method, context: Context, tracker: &[f64]) -> Result<Self, MethodError> {
+        let start = context.tracker.position(tracker);
+        let last = context.speeds.len() - 1;
+        Ok(match method {
+            Method::Parametric => Controller::Parametric(Box::new(Parametric::start(context, start).await?)),
+            Method::FastrackSlowest => Controller::Levels(Box::new(LevelPlanner::new(context, vec![0], start))),
+            Method::FastrackFastest => Controller::Levels(Box::new(LevelPlanner::new(context, vec![last], start))),
+            Method::MetaFastrack { levels } => {
+                if *levels < 2 {
+                    return Err(MethodError::Setup(format!("Meta-FaSTrack needs at least 2 levels, got {levels}")));
+                }
+                let rows = (0..*levels).map(|k| (k * last + (levels - 1) / 2) / (levels - 1)).collect();
+                Controller::Levels(Box::new(LevelPlanner::new(context, rows, start)))
+            }
+            Method::Mppi(settings) => Controller::Mppi(Box::new(Mppi::new(context, settings.clone())?)),
+        })
+    }
+
+    /// The decision for the control period starting at tracker state `tracker`, with `sensed` obstacles.
+    pub async fn step(&mut self, tracker: &[f64], sensed: &[Obstacle]) -> Result<Decision, MethodError> {
+        match self {
+            Controller::Parametric(method) => method.step(tracker, sensed).await,
+            Controller::Levels(method) => method.step(tracker, sensed).await,
+            Controller::Mppi(method) => method.step(tracker, sensed),
+        }
+    }
+
+    /// The raw path still ahead of the planner (empty for MPPI).
+    pub fn raw_path(&self) -> Vec<Point> {
+        match self {
+            Controller::Parametric(method) => method.raw_path(),
+            Controller::Levels(method) => method.raw_path(),
+            Controller::Mppi(_) => Vec::new(),
+        }
+    }
+}

@@ -1,0 +1,47 @@
+//! Parametric FaSTrack: the online loop of `fastrack-online` over the server's `Track` stream, with A* on a
+//! grid as its raw-path planner.
+
+use super::{Context, Decision, MethodError};
+use fastrack_online::geometry::{Obstacle, Point};
+use fastrack_online::online_loop::{Branch, LoopSettings, OnlineLoop};
+use fastrack_online::raw_path::GridAStar;
+
+/// Parametric FaSTrack, running.
+pub struct Parametric {
+    online: OnlineLoop,
+    planner: GridAStar,
+}
+
+impl Parametric {
+    /// Opens the loop's stream with the planner at `start`.
+    pub async fn start(context: Context, start: Point) -> Result<Self, MethodError> {
+        let settings = LoopSettings {
+            model: context.model.clone(),
+            control_period: context.control_period,
+            goal: context.world.goal,
+            bounds: context.world.bounds(),
+            reset_candidates: 256,
+            seed: context.seed,
+        };
+        Ok(Self { online: OnlineLoop::start(&context.client, settings, start).await?, planner: GridAStar::default() })
+    }
+
+    /// One step of Alg. 3.
+    pub async fn step(&mut self, tracker: &[f64], sensed: &[Obstacle]) -> Result<Decision, MethodError> {
+        let report = self.online.step(tracker, sensed, &mut self.planner).await?;
+        Ok(Decision {
+            control: report.control,
+            planner: Some(report.planner),
+            beta: Some(report.beta_query),
+            bound: Some(report.dteb_radius),
+            replanned: report.replanned,
+            reset: report.branch == Branch::Reset,
+            round_trips: report.round_trips,
+        })
+    }
+
+    /// The raw path ahead of the planner.
+    pub fn raw_path(&self) -> Vec<Point> {
+        self.online.raw_path().copied().collect()
+    }
+}

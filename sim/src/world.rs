@@ -1,0 +1,348 @@
+//! 2-D worlds: a workspace, a start and a goal, and obstacles (circles, rectangles, walls), read from TOML or
+//! JSON or generated from a seed; checked to be feasible for the sTEB-inflated map.
+
+use fastrack_online::geometry::{clearance, Obstacle, Point};
+use fastrack_online::raw_path::{GridAStar, PlanRequest, RawPathPlanner};
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use serde::{Deserialize, Serialize};
+use std::path::Path;
+
+/// A world the simulated robot drives through.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct World {
+    /// Lower-left corner of the workspace (m).
+    pub min: Point,
+    /// Upper-right corner (m).
+    pub max: Point,
+    /// The tracker's start position; the planner starts there too.
+    pub start: Point,
+    /// The tracker's start heading (rad; dubins4d: 0 along +y, pi/2 along +x).
+    #[serde(default)]
+    pub start_heading: f64,
+    /// The tracker's start speed (m/s).
+    #[serde(default = "default_start_speed")]
+    pub start_speed: f64,
+    /// The goal.
+    pub goal: Point,
+    /// The run ends when the tracker is this close to the goal (m). The default, 1.5 m, exceeds the circle
+    /// a Dubins car holds around a planner at rest under the learned control (about 1.1 m on `dubins4d`/3):
+    /// no tracker is guaranteed closer to its planner than the sTEB.
+    #[serde(default = "default_goal_radius")]
+    pub goal_radius: f64,
+    /// The obstacles.
+    #[serde(default)]
+    pub obstacles: Vec<Obstacle>,
+}
+
+fn default_start_speed() -> f64 {
+    0.5
+}
+
+fn default_goal_radius() -> f64 {
+    1.5
+}
+
+/// A world that cannot be used: which field, and what is wrong.
+#[derive(Debug, thiserror::Error)]
+pub enum WorldError {
+    /// The file cannot be read.
+    #[error("{path}: {source}")]
+    Io {
+        /// The file.
+        path: String,
+        /// The error.
+        source: std::io::Error,
+    },
+    /// The file does not parse (unknown keys, wrong types).
+    #[error("{path}: {problem}")]
+    Parse {
+        /// The file.
+        path: String,
+        /// The parser's message.
+        problem: String,
+    },
+    /// A value is out of range.
+    #[error("world field `{field}`: {problem}")]
+    Invalid {
+        /// The field, e.g. `obstacles[2]`.
+        field: String,
+        /// What is wrong and what is allowed.
+        problem: String,
+    },
+    /// No path from the start to the goal keeps the inflation from every obstacle.
+    #[error(
+        "no path from the start {start:?} to the goal {goal:?} keeps {inflation} m (the sTEB) from every obstacle"
+    )]
+    Infeasible {
+        /// The start.
+        start: Point,
+        /// The goal.
+        goal: Point,
+        /// The inflation.
+        inflation: f64,
+    },
+    /// Generation found no feasible world.
+    #[error("no feasible world after {attempts} attempts with these settings (fewer or smaller obstacles?)")]
+    Generation {
+        /// Worlds drawn.
+        attempts: usize,
+    },
+}
+
+fn invalid<T>(field: impl Into<String>, problem: impl Into<String>) -> Result<T, WorldError> {
+    Err(WorldError::Invalid { field: field.into(), problem: problem.into() })
+}
+
+impl World {
+    /// Reads a world from a `.toml` or `.json` file (by extension) and checks its values.
+    pub fn load(path: &Path) -> Result<Self, WorldError> {
+        let name = path.display().to_string();
+        let text = std::fs::read_to_string(path).map_err(|source| WorldError::Io { path: name.clone(), source })?;
+        let parse = |problem: String| WorldError::Parse { path: name.clone(), problem };
+        let world: World = if path.extension().is_some_and(|x| x == "json") {
+            serde_json::from_str(&text).map_err(|e| parse(e.to_string()))?
+        } else {
+            toml::from_str(&text).map_err(|e| parse(e.to_string()))?
+        };
+        world.validate()?;
+        Ok(world)
+    }
+
+    /// The world as TOML.
+    pub fn to_toml(&self) -> String {
+        toml::to_string_pretty(self).expect("a world serialises")
+    }
+
+    /// The workspace as `(min, max)`.
+    pub fn bounds(&self) -> (Point, Point) {
+        (self.min, self.max)
+    }
+
+    /// True if `p` lies in the workspace.
+    pub fn contains(&self, p: Point) -> bool {
+        p[0] >= self.min[0] && p[0] <= self.max[0] && p[1] >= self.min[1] && p[1] <= self.max[1]
+    }
+
+    /// Checks every value: finite numbers, a workspace with area, obstacles that exist, start and goal inside
+    /// the workspace and outside every obstacle.
+    pub fn validate(&self) -> Result<(), WorldError> {
+        let finite = |p: &Point| p.iter().all(|x| x.is_finite());
+        if !(finite(&self.min) && finite(&self.max) && self.min[0] < self.max[0] && self.min[1] < self.max[1]) {
+            return invalid(
+                "min/max",
+                format!("the workspace {:?}..{:?} must be finite with min below max", self.min, self.max),
+            );
+        }
+        for (field, p) in [("start", self.start), ("goal", self.goal)] {
+            if !(finite(&p) && self.contains(p)) {
+                return invalid(field, format!("{p:?} must lie in the workspace {:?}..{:?}", self.min, self.max));
+            }
+        }
+        if !(self.start_heading.is_finite() && self.start_speed.is_finite() && self.start_speed >= 0.0) {
+            return invalid("start_heading/start_speed", "must be finite, the speed >= 0");
+        }
+        if !(self.goal_radius.is_finite() && self.goal_radius > 0.0) {
+            return invalid("goal_radius", format!("{} must be > 0", self.goal_radius));
+        }
+        for (i, obstacle) in self.obstacles.iter().enumerate() {
+            obstacle.validate().or_else(|e| invalid(format!("obstacles[{i}]"), e.0))?;
+            for (field, p) in [("start", self.start), ("goal", self.goal)] {
+                if obstacle.distance(p) == 0.0 {
+                    return invalid(field, format!("{p:?} lies inside obstacles[{i}]"));
+                }
+            }
+        }
+        Ok(())
+    }
+
+    /// Checks that start and goal keep more than `inflation` (the sTEB) from every obstacle and that a path
+    /// between them does too, on the whole map.
+    pub fn check_feasible(&self, inflation: f64) -> Result<(), WorldError> {
+        for (field, p) in [("start", self.start), ("goal", self.goal)] {
+            let gap = clearance(&self.obstacles, p);
+            if gap <= inflation {
+                return invalid(
+                    field,
+                    format!("{p:?} lies {gap:.3} m from an obstacle; it needs more than the sTEB, {inflation} m"),
+                );
+            }
+        }
+        let request = PlanRequest {
+            start: self.start,
+            goal: self.goal,
+            obstacles: &self.obstacles,
+            inflation,
+            bounds: self.bounds(),
+        };
+        GridAStar::default().plan(&request).map(|_| ()).map_err(|_| WorldError::Infeasible {
+            start: self.start,
+            goal: self.goal,
+            inflation,
+        })
+    }
+}
+
+/// How to generate a world.
+#[derive(Debug, Clone, PartialEq)]
+pub struct WorldSpec {
+    /// Seed (the same seed gives the same world).
+    pub seed: u64,
+    /// Workspace width and height (m), from the origin.
+    pub size: Point,
+    /// Obstacles per 100 m^2 of workspace.
+    pub density: f64,
+    /// Range of an obstacle's size (m): circle radius, rectangle half side, wall half length.
+    pub size_range: (f64, f64),
+    /// The inflation a generated world must be feasible for (the model's sTEB).
+    pub inflation: f64,
+    /// Worlds drawn before giving up.
+    pub attempts: usize,
+}
+
+impl Default for WorldSpec {
+    fn default() -> Self {
+        Self { seed: 1, size: [30.0, 20.0], density: 2.0, size_range: (0.4, 1.5), inflation: 1.0, attempts: 200 }
+    }
+}
+
+impl WorldSpec {
+    /// A feasible world: start and goal at the middle of the left and right edges, obstacles of random
+    /// kinds placed uniformly, redrawn until the sTEB-inflated map has a path.
+    pub fn generate(&self) -> Result<World, WorldError> {
+        let (lo, hi) = self.size_range;
+        if !(lo > 0.0 && lo <= hi && hi.is_finite() && self.density >= 0.0 && self.density.is_finite()) {
+            return invalid(
+                "spec",
+                format!(
+                    "size range {:?} must be positive and increasing, density {} >= 0",
+                    self.size_range, self.density
+                ),
+            );
+        }
+        if !(self.size[0] > 4.0 && self.size[1] > 4.0) {
+            return invalid("spec.size", format!("{:?}: the workspace must be more than 4 m each way", self.size));
+        }
+        let mut rng = StdRng::seed_from_u64(self.seed);
+        let count = (self.density * self.size[0] * self.size[1] / 100.0).round() as usize;
+        let (w, h) = (self.size[0], self.size[1]);
+        let (start, goal) = ([2.0, h / 2.0], [w - 2.0, h / 2.0]);
+        for _ in 0..self.attempts {
+            let obstacles = (0..count).map(|_| random_obstacle(&mut rng, [w, h], (lo, hi))).collect();
+            let world = World {
+                min: [0.0, 0.0],
+                max: [w, h],
+                start,
+                start_heading: std::f64::consts::FRAC_PI_2,
+                start_speed: default_start_speed(),
+                goal,
+                goal_radius: default_goal_radius(),
+                obstacles,
+            };
+            if world.validate().is_ok() && world.check_feasible(self.inflation).is_ok() {
+                return Ok(world);
+            }
+        }
+        Err(WorldError::Generation { attempts: self.attempts })
+    }
+}
+
+fn random_obstacle(rng: &mut StdRng, size: Point, (lo, hi): (f64, f64)) -> Obstacle {
+    let center = [rng.random_range(0.0..size[0]), rng.random_range(0.0..size[1])];
+    let extent = rng.random_range(lo..=hi);
+    match rng.random_range(0..3) {
+        0 => Obstacle::Circle { center, radius: extent },
+        1 => {
+            let aspect: f64 = rng.random_range(0.5..2.0);
+            let (hx, hy) = (extent * aspect.sqrt(), extent / aspect.sqrt());
+            Obstacle::Rectangle { min: [center[0] - hx, center[1] - hy], max: [center[0] + hx, center[1] + hy] }
+        }
+        _ => {
+            let angle = rng.random_range(0.0..std::f64::consts::PI);
+            let (dx, dy) = (2.0 * extent * angle.cos(), 2.0 * extent * angle.sin());
+            Obstacle::Wall {
+                from: [center[0] - dx, center[1] - dy],
+                to: [center[0] + dx, center[1] + dy],
+                thickness: rng.random_range(0.1..0.3),
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    fn write(name: &str, text: &str) -> (tempfile::TempDir, std::path::PathBuf) {
+        let dir = tempfile::tempdir().unwrap();
+        let path = dir.path().join(name);
+        std::fs::write(&path, text).unwrap();
+        (dir, path)
+    }
+
+    const GOOD: &str = r#"
+min = [0.0, 0.0]
+max = [20.0, 10.0]
+start = [1.0, 5.0]
+goal = [19.0, 5.0]
+
+[[obstacles]]
+kind = "circle"
+center = [10.0, 5.0]
+radius = 1.0
+"#;
+
+    #[test]
+    fn a_world_file_round_trips_and_is_feasible() {
+        let (_dir, path) = write("w.toml", GOOD);
+        let world = World::load(&path).unwrap();
+        assert_eq!(world.obstacles.len(), 1);
+        world.check_feasible(0.9).unwrap();
+        let (_dir2, again) = write("again.toml", &world.to_toml());
+        assert_eq!(World::load(&again).unwrap(), world);
+        let (_dir3, json) = write("w.json", &serde_json::to_string(&world).unwrap());
+        assert_eq!(World::load(&json).unwrap(), world);
+    }
+
+    #[test]
+    fn bad_world_files_are_named() {
+        let cases = [
+            (GOOD.replace("radius = 1.0", "radius = -1.0"), "radius"),
+            (GOOD.replace("goal = [19.0, 5.0]", "goal = [19.0, 5.0]\ncolour = \"red\""), "colour"),
+            (GOOD.replace("start = [1.0, 5.0]", "start = [10.0, 5.2]"), "start"),
+            (GOOD.replace("goal = [19.0, 5.0]", "goal = [25.0, 5.0]"), "goal"),
+            (GOOD.replace("kind = \"circle\"", "kind = \"blob\""), "blob"),
+        ];
+        for (text, named) in cases {
+            let (_dir, path) = write("bad.toml", &text);
+            let error = World::load(&path).unwrap_err().to_string();
+            assert!(error.contains(named), "{named}: {error}");
+        }
+        let missing = World::load(Path::new("/nonexistent/world.toml")).unwrap_err();
+        assert!(matches!(missing, WorldError::Io { .. }));
+        // A wall across the workspace: valid, but no path.
+        let walled =
+            format!("{GOOD}\n[[obstacles]]\nkind = \"wall\"\nfrom = [5.0, -1.0]\nto = [5.0, 11.0]\nthickness = 0.2\n");
+        let (_dir, path) = write("walled.toml", &walled);
+        let world = World::load(&path).unwrap();
+        assert!(matches!(world.check_feasible(0.9), Err(WorldError::Infeasible { .. })));
+        // A start too close to an obstacle for the sTEB.
+        let near = GOOD.replace("center = [10.0, 5.0]", "center = [2.5, 5.0]");
+        let (_dir, path) = write("near.toml", &near);
+        let error = World::load(&path).unwrap().check_feasible(0.9).unwrap_err().to_string();
+        assert!(error.contains("start"), "{error}");
+    }
+
+    #[test]
+    fn generated_worlds_are_seeded_and_feasible() {
+        let spec = WorldSpec { seed: 7, inflation: 0.9, ..WorldSpec::default() };
+        let (a, b) = (spec.generate().unwrap(), spec.generate().unwrap());
+        assert_eq!(a, b, "same seed, same world");
+        assert_ne!(a, WorldSpec { seed: 8, ..spec.clone() }.generate().unwrap());
+        a.check_feasible(0.9).unwrap();
+        assert_eq!(a.obstacles.len(), 12, "2 per 100 m^2 of 600 m^2");
+        let impossible = WorldSpec { density: 40.0, attempts: 3, ..spec };
+        assert!(matches!(impossible.generate(), Err(WorldError::Generation { attempts: 3 })));
+    }
+}

@@ -1,0 +1,111 @@
+//! The online loop (Alg. 3) against the real server on the shipped `dubins4d` model: the planner advances at
+//! per-axis speed at most `beta_query`; when `beta` drops next to an obstacle, adjustPlannerControl keeps `p*`
+//! if the tracker is inside the smaller bound and otherwise resets the planner to a free point inside it and
+//! replans; bad tracker states and a server that goes away are errors, never panics.
+
+use fastrack_client::{model_ref, FastrackClient};
+use fastrack_e2e::TestServer;
+use fastrack_online::geometry::{clearance, Obstacle};
+use fastrack_online::online_loop::{Branch, LoopError, LoopSettings, OnlineLoop};
+use fastrack_online::raw_path::GridAStar;
+use std::f64::consts::FRAC_PI_2;
+use std::path::Path;
+
+/// dubins4d heading along +x (`x' = v sin theta`).
+const ALONG_X: f64 = FRAC_PI_2;
+
+fn settings() -> LoopSettings {
+    LoopSettings {
+        model: model_ref("dubins4d", 0),
+        control_period: 0.1,
+        goal: [10.0, 0.0],
+        bounds: ([-2.0, -6.0], [12.0, 6.0]),
+        reset_candidates: 64,
+        seed: 5,
+    }
+}
+
+async fn shipped_server() -> (TestServer, FastrackClient) {
+    TestServer::start_serving(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../models")).await
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_planner_advances_at_most_beta_dt_per_axis() {
+    let (_server, client) = shipped_server().await;
+    let mut online = OnlineLoop::start(&client, settings(), [0.0, 0.0]).await.unwrap();
+    let mut planner = GridAStar::default();
+    let first = online.step(&[0.0, 0.0, ALONG_X, 1.0], &[], &mut planner).await.unwrap();
+    assert_eq!((first.branch, first.replanned, first.round_trips), (Branch::Advance, true, 1));
+    assert_eq!(first.beta_query, 1.25, "no obstacle: beta_u");
+    assert!((first.planner[0] - 0.125).abs() < 1e-12 && first.planner[1] == 0.0, "{:?}", first.planner);
+    // A goal off the axis: the straight path moves both axes, the larger one at exactly beta dt.
+    let mut diagonal =
+        OnlineLoop::start(&client, LoopSettings { goal: [6.0, 3.0], ..settings() }, [0.0, 0.0]).await.unwrap();
+    let step = diagonal.step(&[0.0, 0.0, ALONG_X, 1.0], &[], &mut planner).await.unwrap();
+    assert!((step.planner[0] - 0.125).abs() < 1e-12 && (step.planner[1] - 0.0625).abs() < 1e-12, "{:?}", step.planner);
+    assert_eq!(step.control.len(), 2);
+    assert!(step.in_teb && step.in_domain, "{step:?}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_drop_in_beta_keeps_p_star_when_the_tracker_is_inside_the_smaller_bound() {
+    let (_server, client) = shipped_server().await;
+    let mut online = OnlineLoop::start(&client, settings(), [0.0, 0.0]).await.unwrap();
+    let mut planner = GridAStar::default();
+    let tracker = [0.0, 0.0, ALONG_X, 1.0];
+    online.step(&tracker, &[], &mut planner).await.unwrap();
+    // An obstacle 2.5 m ahead: beta drops to the largest row whose bound fits 1.25 m.
+    let obstacle = Obstacle::Circle { center: [3.0, 0.0], radius: 0.5 };
+    let step = online.step(&tracker, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
+    assert_eq!(step.d_obs, Some(2.5));
+    assert!(step.beta_query < step.beta_old && step.dteb_radius <= 1.25, "{step:?}");
+    assert!(step.replanned, "a newly sensed obstacle is planned around");
+    assert_eq!(step.branch, Branch::Keep, "{step:?}");
+    assert!(step.in_teb && step.value <= step.dteb_radius, "{step:?}");
+    // p* is the raw-path state closest to the tracker: the planner's own state, 0.125 m ahead.
+    assert!((step.planner[0] - 0.125).abs() < 1e-12 && step.planner[1].abs() < 1e-12, "{:?}", step.planner);
+    // The path now keeps the sTEB from the obstacle.
+    for point in online.raw_path() {
+        assert!(clearance(std::slice::from_ref(&obstacle), *point) > step.steb_radius, "{point:?}");
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_drop_in_beta_far_from_the_plan_resets_the_planner_inside_the_bound_and_replans() {
+    let (_server, client) = shipped_server().await;
+    let mut online = OnlineLoop::start(&client, settings(), [0.0, 0.0]).await.unwrap();
+    let mut planner = GridAStar::default();
+    online.step(&[0.0, 0.0, ALONG_X, 1.0], &[], &mut planner).await.unwrap();
+    // The tracker 2.5 m off the plan, an obstacle 2.5 m beyond it: the smaller bound cannot hold p*.
+    let tracker = [0.0, 2.5, ALONG_X, 1.0];
+    let obstacle = Obstacle::Circle { center: [0.0, 5.5], radius: 0.5 };
+    let step = online.step(&tracker, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
+    assert!(step.beta_query < step.beta_old, "{step:?}");
+    assert_eq!(step.branch, Branch::Reset, "{step:?}");
+    assert!(step.round_trips >= 2, "p* and at least one reset candidate were asked");
+    assert!(step.in_teb && step.value <= step.dteb_radius, "the reset planner state is inside dTEBmax: {step:?}");
+    let offset = (step.planner[0] - tracker[0]).hypot(step.planner[1] - tracker[1]);
+    assert!(offset <= step.dteb_radius, "the reset point lies within dTEBmax of the tracker: {offset}");
+    assert!(
+        clearance(std::slice::from_ref(&obstacle), step.planner) > step.steb_radius,
+        "and outside the inflated obstacle"
+    );
+    let next = online.step(&tracker, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
+    assert!(next.replanned, "the reset flags a replan");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn bad_tracker_states_and_a_vanished_server_are_errors() {
+    let (mut server, client) = shipped_server().await;
+    let mut online = OnlineLoop::start(&client, settings(), [0.0, 0.0]).await.unwrap();
+    let mut planner = GridAStar::default();
+    let short = online.step(&[0.0, 0.0, 1.0], &[], &mut planner).await.unwrap_err();
+    assert!(matches!(short, LoopError::Tracker(_)), "{short}");
+    let nan = online.step(&[0.0, f64::NAN, 1.0, 1.0], &[], &mut planner).await.unwrap_err();
+    assert!(nan.to_string().contains("tracker[1]"), "{nan}");
+    let bad_period = OnlineLoop::start(&client, LoopSettings { control_period: 0.0, ..settings() }, [0.0, 0.0]).await;
+    assert!(matches!(bad_period, Err(LoopError::Setup(_))));
+    server.terminate();
+    let gone = online.step(&[0.0, 0.0, ALONG_X, 1.0], &[], &mut planner).await.unwrap_err();
+    assert!(matches!(gone, LoopError::Client(_)), "{gone}");
+}
