@@ -232,7 +232,8 @@ impl OnlineLoop {
             Err(LoopError::TableMismatch { .. }) => {
                 let info = self.client.get_model(self.settings.model.clone()).await?;
                 self.speeds = info.teb_table.iter().map(SpeedRow::from).collect();
-                self.decide(tracker, false, planner).await
+                // The new table's sTEB may differ: plan again with it.
+                self.decide(tracker, true, planner).await
             }
             other => other,
         }
@@ -276,9 +277,14 @@ impl OnlineLoop {
                 (Branch::Reset, candidate, reply)
             }
         } else {
-            let p_next = advance_along(self.planner, &mut self.raw_path, speed.beta * self.settings.control_period);
+            // The path is consumed only once the server has answered: a step taken again (the table changed)
+            // starts from the same planner state and path.
+            let mut ahead = self.raw_path.clone();
+            let p_next = advance_along(self.planner, &mut ahead, speed.beta * self.settings.control_period);
             round_trips += 1;
-            (Branch::Advance, p_next, self.tick(tracker, p_next, d_obs, speed.beta).await?)
+            let reply = self.tick(tracker, p_next, d_obs, speed.beta).await?;
+            self.raw_path = ahead;
+            (Branch::Advance, p_next, reply)
         };
         self.beta_query = speed.beta;
         self.planner = p_next;

@@ -42,6 +42,8 @@ pub struct Summary {
     pub resets: f64,
     /// Mean server calls per run.
     pub round_trips: f64,
+    /// Control periods, over every run, whose control was read outside the trained domain.
+    pub out_of_domain: usize,
     /// Median and 99th percentile of the decision time per control period.
     pub decision_p50: Duration,
     /// The 99th percentile.
@@ -76,6 +78,7 @@ pub fn summarise(method: &'static str, runs: &[&Run]) -> Summary {
         replans: mean(&|r| r.replans),
         resets: mean(&|r| r.resets),
         round_trips: mean(&|r| r.round_trips),
+        out_of_domain: runs.iter().map(|r| r.out_of_domain).sum(),
         decision_p50: rank(0.5).unwrap_or_default(),
         decision_p99: rank(0.99).unwrap_or_default(),
     }
@@ -100,6 +103,7 @@ pub fn table(summaries: &[Summary]) -> Table {
         "replans",
         "resets",
         "server calls",
+        "steps out of domain",
         "decision p50 / p99 (ms)",
     ]);
     for s in summaries {
@@ -116,6 +120,7 @@ pub fn table(summaries: &[Summary]) -> Table {
             format!("{:.1}", s.replans),
             format!("{:.1}", s.resets),
             format!("{:.0}", s.round_trips),
+            s.out_of_domain.to_string(),
             format!("{:.3} / {:.3}", s.decision_p50.as_secs_f64() * 1e3, s.decision_p99.as_secs_f64() * 1e3),
         ]);
     }
@@ -166,7 +171,7 @@ pub fn summary_json(s: &Summary) -> Value {
         "bound_exceeded": s.bound_exceeded, "timed_out_or_gave_up": s.other,
         "time_to_goal_mean_s": s.time_to_goal.map(|t| t.0), "time_to_goal_sd_s": s.time_to_goal.map(|t| t.1),
         "min_clearance_m": s.min_clearance, "largest_error_minus_bound_m": s.worst_excess,
-        "replans_mean": s.replans, "resets_mean": s.resets, "server_calls_mean": s.round_trips,
+        "replans_mean": s.replans, "resets_mean": s.resets, "server_calls_mean": s.round_trips, "steps_out_of_domain": s.out_of_domain,
         "decision_p50_ms": s.decision_p50.as_secs_f64() * 1e3, "decision_p99_ms": s.decision_p99.as_secs_f64() * 1e3,
     })
 }

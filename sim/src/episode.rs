@@ -126,6 +126,8 @@ pub struct Run {
     pub resets: usize,
     /// Calls to the server (ticks or unary calls).
     pub round_trips: usize,
+    /// Control periods whose control was read outside the model's trained domain (extrapolated).
+    pub out_of_domain: usize,
     /// The method's decision time per control period, server calls included.
     pub decision_times: Vec<Duration>,
     /// The sensing range used (m).
@@ -190,6 +192,7 @@ pub async fn run(
         replans: 0,
         resets: 0,
         round_trips: 0,
+        out_of_domain: 0,
         decision_times: Vec::new(),
         sensor_range: sensor.range,
         steb_radius: steb,
@@ -220,6 +223,7 @@ pub async fn run(
         run.replans += usize::from(decision.replanned);
         run.resets += usize::from(decision.reset);
         run.round_trips += decision.round_trips;
+        run.out_of_domain += usize::from(decision.out_of_domain);
         if let Some(disturbance) = &settings.disturbance {
             if (t / disturbance.period).floor() != ((t - control_period) / disturbance.period).floor() || k == 0 {
                 push = disturbance.draw(&mut rng);

@@ -182,6 +182,7 @@ pub fn methods_on_one_world(path: &Path, world: &World, runs: &[&Run]) -> Result
     if text {
         chart
             .configure_series_labels()
+            .position(SeriesLabelPosition::UpperLeft)
             .background_style(WHITE.mix(0.8))
             .border_style(BLACK)
             .draw()
@@ -206,4 +207,26 @@ pub fn over_time(path: &Path, run: &Run) -> Result<(), String> {
     let drawn: Vec<Series> = all.into_iter().filter(|s| !s.points.is_empty()).collect();
     let title = format!("{}: beta, clearance, error and bound", run.method);
     line_chart(path, &Chart { title: &title, x_label: "t (s)", y_label: "", log_y: false }, &drawn)
+}
+
+/// Time to goal per world, one marker series per method (runs that did not reach the goal are left out).
+pub fn time_to_goal(path: &Path, methods: &[&str], runs_by_method: &[Vec<&Run>]) -> Result<(), String> {
+    let drawn: Vec<Series> = methods
+        .iter()
+        .zip(runs_by_method)
+        .map(|(label, runs)| Series {
+            label: (*label).into(),
+            points: runs
+                .iter()
+                .enumerate()
+                .filter(|(_, r)| r.outcome == crate::episode::Outcome::Reached)
+                .map(|(w, r)| ((w + 1) as f64, r.time))
+                .collect(),
+            markers: true,
+        })
+        .filter(|s| !s.points.is_empty())
+        .collect();
+    let chart =
+        Chart { title: "time to goal per world", x_label: "world (seed)", y_label: "time to goal (s)", log_y: false };
+    line_chart(path, &chart, &drawn)
 }

@@ -42,6 +42,7 @@ async fn parametric_fastrack_reaches_every_goal_safely_on_twenty_worlds() {
             done.worst_excess
         );
         assert!(done.samples.iter().all(|s| s.bound.is_some() && s.error.is_some()), "every period checked");
+        assert_eq!(done.out_of_domain, 0, "world {}: controls read outside the trained domain", i + 1);
         runs.push(done);
     }
     let all: Vec<&Run> = runs.iter().collect();

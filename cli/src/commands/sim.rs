@@ -9,7 +9,7 @@ use fastrack_proto::planner_speed::SpeedRow;
 use fastrack_sim::bench::{paper_comparison, summarise, summary_json, table, time_ratio, Summary};
 use fastrack_sim::episode::{run, Outcome, Run, RunSettings};
 use fastrack_sim::methods::Method;
-use fastrack_sim::plot::{methods_on_one_world, over_time, trajectory};
+use fastrack_sim::plot::{methods_on_one_world, over_time, time_to_goal, trajectory};
 use fastrack_sim::tracker::Disturbance;
 use fastrack_sim::world::{World, WorldSpec};
 use fastrack_valuefn::record::write_record;
@@ -221,7 +221,7 @@ fn run_line(run: &Run) -> String {
     let p =
         |q: f64| decisions.get(((q * decisions.len() as f64) as usize).min(decisions.len().saturating_sub(1))).copied();
     format!(
-        "{}: {} after {:.2} s; min clearance {:.3} m; largest error - bound {}; replans {}, resets {}, server calls {}; decision p50 {:.3} ms, p99 {:.3} ms{}",
+        "{}: {} after {:.2} s; min clearance {:.3} m; largest error - bound {}; replans {}, resets {}, server calls {}, steps out of domain {}; decision p50 {:.3} ms, p99 {:.3} ms{}",
         run.method,
         run.outcome.label(),
         run.time,
@@ -230,6 +230,7 @@ fn run_line(run: &Run) -> String {
         run.replans,
         run.resets,
         run.round_trips,
+        run.out_of_domain,
         p(0.5).unwrap_or_default().as_secs_f64() * 1e3,
         p(0.99).unwrap_or_default().as_secs_f64() * 1e3,
         match &run.outcome {
@@ -255,7 +256,7 @@ async fn run_one(client: &FastrackClient, args: RunArgs, json_mode: bool) -> any
         json_mode,
         json!({"method": run.method, "outcome": run.outcome.label(), "time_s": run.time, "min_clearance_m": run.min_clearance,
                "largest_error_minus_bound_m": run.worst_excess, "replans": run.replans, "resets": run.resets,
-               "server_calls": run.round_trips, "plot": args.plot, "plot_over_time": over}),
+               "server_calls": run.round_trips, "steps_out_of_domain": run.out_of_domain, "plot": args.plot, "plot_over_time": over}),
         || format!("{}\nfigures: {} and {}", run_line(&run), args.plot.display(), over.display()),
     );
     anyhow::ensure!(!run.outcome.is_unsafe(), "the run was unsafe: {}", run.outcome.label());
@@ -323,6 +324,10 @@ async fn bench(client: &FastrackClient, args: BenchArgs, json_mode: bool) -> any
         let figure = args.results_dir.join(format!("{name}-world1.png"));
         std::fs::create_dir_all(&args.results_dir)?;
         methods_on_one_world(&figure, &worlds[0], &first_world).map_err(anyhow::Error::msg)?;
+        let times_figure = args.results_dir.join(format!("{name}-time-to-goal.png"));
+        let labels: Vec<&str> = methods.iter().map(Method::label).collect();
+        let by_method_runs: Vec<Vec<&Run>> = (0..methods.len()).map(by_method).collect();
+        time_to_goal(&times_figure, &labels, &by_method_runs).map_err(anyhow::Error::msg)?;
         let command = format!(
             "fastrack sim bench --worlds {} --methods {} --jobs {} --record {name}",
             args.worlds,
@@ -339,7 +344,8 @@ async fn bench(client: &FastrackClient, args: BenchArgs, json_mode: bool) -> any
                    "world": {"size": args.generation.size, "density": args.generation.density, "size_range": args.generation.size_range}}),
             json!({"summaries": summaries.iter().map(summary_json).collect::<Vec<_>>(),
                    "pf_time_ratios": ratios.iter().map(|(l, r)| json!({"against": l, "ratio": r.map(|x| x.0), "worlds": r.map(|x| x.1)})).collect::<Vec<_>>(),
-                   "paper_pf_over_f_ratio": 22.47 / 37.31, "wall_s": started.elapsed().as_secs_f64(), "figure": figure}),
+                   "paper_pf_over_f_ratio": 22.47 / 37.31, "wall_s": started.elapsed().as_secs_f64(), "figure": figure,
+                   "time_to_goal_figure": times_figure}),
             &[("Ours", &ours), ("The paper's Table 1 beside ours", &paper)],
         )?;
         eprintln!("record: {}", path.display());
@@ -413,14 +419,20 @@ async fn fleet(client: &FastrackClient, args: FleetArgs, json_mode: bool) -> any
             "robots",
             "ticks/s",
             "decision p99 (ms)",
+            "slowest robot's steps/s",
+            "steps/s its control period needs",
             "holds its control period",
+            "unsafe runs",
         ]);
         for f in &figures {
             rows.row(vec![
                 f["robots"].to_string(),
                 format!("{:.0}", f["ticks_per_s"].as_f64().unwrap_or_default()),
                 format!("{:.3}", f["decision_p99_ms"].as_f64().unwrap_or_default()),
+                format!("{:.0}", f["slowest_robot_steps_per_s"].as_f64().unwrap_or_default()),
+                format!("{:.0}", f["needed_steps_per_s"].as_f64().unwrap_or_default()),
                 f["holds_control_period"].to_string(),
+                f["unsafe_runs"].to_string(),
             ]);
         }
         let path = write_record(
@@ -446,6 +458,9 @@ async fn world(client: &FastrackClient, args: WorldArgs, json_mode: bool) -> any
             format!("{}: valid, and a path keeps the sTEB ({steb:.3} m) from every obstacle", path.display())
         }),
         (None, Some(out)) => {
+            if let Some(dir) = out.parent().filter(|d| !d.as_os_str().is_empty()) {
+                std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+            }
             std::fs::write(out, &text).with_context(|| format!("writing {}", out.display()))?;
             print(json_mode, json!({"world": out, "obstacles": world.obstacles.len()}), || {
                 format!("{}: {} obstacles, feasible for the sTEB ({steb:.3} m)", out.display(), world.obstacles.len())

@@ -100,7 +100,7 @@ impl LevelPlanner {
                 self.pending = Some((level, path));
             }
         }
-        let (p_next, control) = match self.pending.take() {
+        let (p_next, control, in_domain) = match self.pending.take() {
             // Hold the planner and steer with the pending level's control, which drives the relative state
             // towards that level's set; the current level's bound stays in force until the state is inside.
             // Under the current level's own control a Dubins car circles a still planner outside the
@@ -113,13 +113,14 @@ impl LevelPlanner {
                 } else {
                     self.pending = Some((level, path));
                 }
-                (self.planner, answer.controls)
+                (self.planner, answer.controls, answer.in_domain[0])
             }
             None => {
                 let budget = self.levels[self.current].beta * self.context.control_period;
                 let p_next = advance_along(self.planner, &mut self.path, budget);
                 let r = self.context.tracker.relative_state(tracker, p_next);
-                (p_next, self.controls(&[&r], &[self.current]).await?.controls)
+                let answer = self.controls(&[&r], &[self.current]).await?;
+                (p_next, answer.controls, answer.in_domain[0])
             }
         };
         self.planner = p_next;
@@ -131,6 +132,7 @@ impl LevelPlanner {
             replanned,
             reset: false,
             round_trips: 1,
+            out_of_domain: !in_domain,
         })
     }
 }

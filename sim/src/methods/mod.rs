@@ -88,6 +88,8 @@ pub struct Decision {
     pub reset: bool,
     /// Calls to the server this period.
     pub round_trips: usize,
+    /// The control was read at a relative state outside the model's trained domain (extrapolated).
+    pub out_of_domain: bool,
 }
 
 /// Why a method cannot go on.

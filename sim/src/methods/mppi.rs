@@ -104,7 +104,16 @@ impl Mppi {
             let last = self.nominal.len() - 1;
             self.nominal[last] = self.nominal[last.saturating_sub(1)].clone();
         }
-        Ok(Decision { control, planner: None, beta: None, bound: None, replanned, reset: false, round_trips: 0 })
+        Ok(Decision {
+            control,
+            planner: None,
+            beta: None,
+            bound: None,
+            replanned,
+            reset: false,
+            round_trips: 0,
+            out_of_domain: false,
+        })
     }
 
     /// One MPPI update of the nominal sequence from tracker state `tracker`.

@@ -37,6 +37,7 @@ impl Parametric {
             replanned: report.replanned,
             reset: report.branch == Branch::Reset,
             round_trips: report.round_trips,
+            out_of_domain: !report.in_domain,
         })
     }
 
