@@ -6,6 +6,7 @@ use crate::episode::Run;
 use crate::world::World;
 use fastrack_online::geometry::{Obstacle, Point};
 use fastrack_valuefn::plot::{fonts_available, line_chart, Chart, Series};
+use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::path::Path;
 
@@ -75,11 +76,7 @@ fn ever_sensed<'a>(world: &'a World, run: &Run) -> Vec<&'a Obstacle> {
 }
 
 fn draw_world<DB: DrawingBackend>(
-    chart: &mut ChartContext<
-        '_,
-        DB,
-        Cartesian2d<plotters::coord::types::RangedCoordf64, plotters::coord::types::RangedCoordf64>,
-    >,
+    chart: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
     world: &World,
     sensed: &[&Obstacle],
 ) -> Result<(), String> {
@@ -93,17 +90,18 @@ fn draw_world<DB: DrawingBackend>(
     Ok(())
 }
 
-/// Draws one run through `world` into a 1100x760 PNG: the tracker's path coloured by `beta`, the planner
-/// dotted, the sTEB (green) and the dTEB (orange) around the planner every `every` seconds, the sensing
-/// range (dashed grey) at the same places, sensed obstacles dark, the others light, the goal green.
-pub fn trajectory(path: &Path, world: &World, run: &Run, beta_l: f64, every: f64) -> Result<(), String> {
-    let text = fonts_available();
-    let root = BitMapBackend::new(path, (1100, 760)).into_drawing_area();
+/// The world's workspace as a white chart in metres on `root`, captioned and with axes when fonts exist.
+fn world_chart<'r, 'b>(
+    root: &'r DrawingArea<BitMapBackend<'b>, plotters::coord::Shift>,
+    world: &World,
+    caption: &str,
+    text: bool,
+) -> Result<ChartContext<'r, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>, String> {
     root.fill(&WHITE).map_err(|e| e.to_string())?;
-    let mut builder = ChartBuilder::on(&root);
+    let mut builder = ChartBuilder::on(root);
     builder.margin(20);
     if text {
-        builder.caption(format!("{}: {} after {:.1} s", run.method, run.outcome.label(), run.time), ("sans-serif", 22));
+        builder.caption(caption, ("sans-serif", 22));
         builder.x_label_area_size(35).y_label_area_size(45);
     }
     let mut chart = builder
@@ -112,6 +110,17 @@ pub fn trajectory(path: &Path, world: &World, run: &Run, beta_l: f64, every: f64
     if text {
         chart.configure_mesh().disable_mesh().x_desc("x (m)").y_desc("y (m)").draw().map_err(|e| e.to_string())?;
     }
+    Ok(chart)
+}
+
+/// Draws one run through `world` into a 1100x760 PNG: the tracker's path coloured by `beta`, the planner
+/// dotted, the sTEB (green) and the dTEB (orange) around the planner every `every` seconds, the sensing
+/// range (dashed grey) at the same places, sensed obstacles dark, the others light, the goal green.
+pub fn trajectory(path: &Path, world: &World, run: &Run, beta_l: f64, every: f64) -> Result<(), String> {
+    let text = fonts_available();
+    let root = BitMapBackend::new(path, (1100, 760)).into_drawing_area();
+    let caption = format!("{}: {} after {:.1} s", run.method, run.outcome.label(), run.time);
+    let mut chart = world_chart(&root, world, &caption, text)?;
     draw_world(&mut chart, world, &ever_sensed(world, run))?;
     let stride = ((every / run.control_period).round() as usize).max(1);
     for sample in run.samples.iter().step_by(stride) {
@@ -151,19 +160,7 @@ pub fn trajectory(path: &Path, world: &World, run: &Run, beta_l: f64, every: f64
 pub fn methods_on_one_world(path: &Path, world: &World, runs: &[&Run]) -> Result<(), String> {
     let text = fonts_available();
     let root = BitMapBackend::new(path, (1100, 760)).into_drawing_area();
-    root.fill(&WHITE).map_err(|e| e.to_string())?;
-    let mut builder = ChartBuilder::on(&root);
-    builder.margin(20);
-    if text {
-        builder.caption("every method through one world", ("sans-serif", 22));
-        builder.x_label_area_size(35).y_label_area_size(45);
-    }
-    let mut chart = builder
-        .build_cartesian_2d(world.min[0]..world.max[0], world.min[1]..world.max[1])
-        .map_err(|e| e.to_string())?;
-    if text {
-        chart.configure_mesh().disable_mesh().x_desc("x (m)").y_desc("y (m)").draw().map_err(|e| e.to_string())?;
-    }
+    let mut chart = world_chart(&root, world, "every method through one world", text)?;
     let sensed: Vec<&Obstacle> = runs.iter().flat_map(|r| ever_sensed(world, r)).collect();
     draw_world(&mut chart, world, &sensed)?;
     for (i, run) in runs.iter().enumerate() {

@@ -107,6 +107,17 @@ impl Generation {
     }
 }
 
+/// Where a benchmark's record goes.
+#[derive(clap::Args)]
+struct Recording {
+    /// Record name (`<results-dir>/<record>.{json,md}`, figures beside it); none without it.
+    #[arg(long)]
+    record: Option<String>,
+    /// Folder of measurement records and figures.
+    #[arg(long, default_value = "bench/results")]
+    results_dir: PathBuf,
+}
+
 #[derive(clap::Args)]
 struct RunArgs {
     /// A world file (TOML or JSON); without it, a world generated from --seed.
@@ -139,12 +150,8 @@ struct BenchArgs {
     /// others' load on the machine.
     #[arg(long, default_value_t = 1)]
     jobs: usize,
-    /// Record name (`<results-dir>/<record>.{json,md}`, figures beside it); none without it.
-    #[arg(long)]
-    record: Option<String>,
-    /// Folder of measurement records and figures.
-    #[arg(long, default_value = "bench/results")]
-    results_dir: PathBuf,
+    #[command(flatten)]
+    recording: Recording,
     #[command(flatten)]
     simulation: Simulation,
     #[command(flatten)]
@@ -156,12 +163,8 @@ struct FleetArgs {
     /// Robots at once, each on its own seeded world and Track stream.
     #[arg(long, value_delimiter = ',', default_value = "1,100")]
     robots: Vec<usize>,
-    /// Record name; none without it.
-    #[arg(long)]
-    record: Option<String>,
-    /// Folder of measurement records.
-    #[arg(long, default_value = "bench/results")]
-    results_dir: PathBuf,
+    #[command(flatten)]
+    recording: Recording,
     #[command(flatten)]
     simulation: Simulation,
     #[command(flatten)]
@@ -319,12 +322,12 @@ async fn bench(client: &FastrackClient, args: BenchArgs, json_mode: bool) -> any
         .join("\n");
     let ours = table(&summaries);
     let paper = paper_comparison(&summaries);
-    if let Some(name) = &args.record {
+    if let Some(name) = &args.recording.record {
         let first_world: Vec<&Run> = runs.iter().take(methods.len()).map(|(_, r)| r).collect();
-        let figure = args.results_dir.join(format!("{name}-world1.png"));
-        std::fs::create_dir_all(&args.results_dir)?;
+        let figure = args.recording.results_dir.join(format!("{name}-world1.png"));
+        std::fs::create_dir_all(&args.recording.results_dir)?;
         methods_on_one_world(&figure, &worlds[0], &first_world).map_err(anyhow::Error::msg)?;
-        let times_figure = args.results_dir.join(format!("{name}-time-to-goal.png"));
+        let times_figure = args.recording.results_dir.join(format!("{name}-time-to-goal.png"));
         let labels: Vec<&str> = methods.iter().map(Method::label).collect();
         let by_method_runs: Vec<Vec<&Run>> = (0..methods.len()).map(by_method).collect();
         time_to_goal(&times_figure, &labels, &by_method_runs).map_err(anyhow::Error::msg)?;
@@ -335,7 +338,7 @@ async fn bench(client: &FastrackClient, args: BenchArgs, json_mode: bool) -> any
             args.jobs
         );
         let path = write_record(
-            &args.results_dir,
+            &args.recording.results_dir,
             name,
             &command,
             json!({"model": args.simulation.model, "worlds": args.worlds, "methods": args.methods, "jobs": args.jobs,
@@ -410,7 +413,7 @@ async fn fleet(client: &FastrackClient, args: FleetArgs, json_mode: bool) -> any
             "holds_control_period": real_time, "unsafe_runs": unsafe_runs}));
         anyhow::ensure!(unsafe_runs == 0, "{unsafe_runs} of {robots} runs were unsafe");
     }
-    if let Some(name) = &args.record {
+    if let Some(name) = &args.recording.record {
         let command = format!(
             "fastrack sim fleet --robots {} --record {name}",
             args.robots.iter().map(ToString::to_string).collect::<Vec<_>>().join(",")
@@ -436,7 +439,7 @@ async fn fleet(client: &FastrackClient, args: FleetArgs, json_mode: bool) -> any
             ]);
         }
         let path = write_record(
-            &args.results_dir,
+            &args.recording.results_dir,
             name,
             &command,
             json!({"model": args.simulation.model}),
