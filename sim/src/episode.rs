@@ -180,7 +180,7 @@ pub async fn run(
     let mut s = tracker
         .initial_state(world.start, &[("theta", world.start_heading), ("v", world.start_speed)])
         .map_err(MethodError::Setup)?;
-    let mut controller = Controller::start(method, context, &s).await?;
+    let started = Controller::start(method, context, &s).await;
     let mut rng = StdRng::seed_from_u64(settings.seed ^ 0xD15_7A6B);
     let mut run = Run {
         method: method.label(),
@@ -198,6 +198,16 @@ pub async fn run(
         steb_radius: steb,
         control_period,
         final_path: Vec::new(),
+    };
+    // A method that cannot start on the server (its stream refused, a call timed out) is a failed run,
+    // not a failed benchmark; a method that cannot run on this model at all is an error.
+    let mut controller = match started {
+        Ok(controller) => controller,
+        Err(MethodError::Setup(why)) => return Err(MethodError::Setup(why)),
+        Err(e) => {
+            run.outcome = Outcome::Failed(e.to_string());
+            return Ok(run);
+        }
     };
     let steps = (settings.time_limit / control_period).ceil() as usize;
     let mut push = [0.0, 0.0];
