@@ -4,6 +4,7 @@
 
 use super::{print, Server};
 use anyhow::Context as _;
+use fastrack_cli::load_generator::LatencySummary;
 use fastrack_client::{model_ref, FastrackClient};
 use fastrack_proto::planner_speed::SpeedRow;
 use fastrack_sim::bench::{paper_comparison, summarise, summary_json, table, time_ratio, Summary};
@@ -219,10 +220,7 @@ fn world_of(file: Option<&PathBuf>, generation: &Generation, seed: u64, steb: f6
 }
 
 fn run_line(run: &Run) -> String {
-    let mut decisions = run.decision_times.clone();
-    decisions.sort();
-    let p =
-        |q: f64| decisions.get(((q * decisions.len() as f64) as usize).min(decisions.len().saturating_sub(1))).copied();
+    let latency = LatencySummary::from_latencies(&mut run.decision_times.clone());
     format!(
         "{}: {} after {:.2} s; min clearance {:.3} m; largest error - bound {}; replans {}, resets {}, server calls {}, steps out of domain {}; decision p50 {:.3} ms, p99 {:.3} ms{}",
         run.method,
@@ -234,8 +232,8 @@ fn run_line(run: &Run) -> String {
         run.resets,
         run.round_trips,
         run.out_of_domain,
-        p(0.5).unwrap_or_default().as_secs_f64() * 1e3,
-        p(0.99).unwrap_or_default().as_secs_f64() * 1e3,
+        latency.p50.as_secs_f64() * 1e3,
+        latency.p99.as_secs_f64() * 1e3,
         match &run.outcome {
             Outcome::Failed(why) => format!(" ({why})"),
             Outcome::BoundExceeded { error, bound } => format!(" (error {error:.3} m over the bound {bound:.3} m)"),
@@ -390,8 +388,7 @@ async fn fleet(client: &FastrackClient, args: FleetArgs, json_mode: bool) -> any
         let wall = started.elapsed();
         let ticks: usize = done.iter().map(|r| r.round_trips).sum();
         let mut decisions: Vec<Duration> = done.iter().flat_map(|r| r.decision_times.iter().copied()).collect();
-        decisions.sort();
-        let p99 = decisions.get((0.99 * decisions.len() as f64) as usize).copied().unwrap_or_default();
+        let p99 = LatencySummary::from_latencies(&mut decisions).p99;
         let period = done.first().map_or(0.0, |r| r.control_period);
         let slowest_rate = done
             .iter()
