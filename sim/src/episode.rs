@@ -1,6 +1,12 @@
 //! One run of one method through one world: sense, decide, integrate the true dynamics over the control
 //! period in sub-steps, and at every sub-step check the true map for a collision and the tracking error
 //! against the bound in force. A collision or an error beyond the bound ends the run as a failure.
+//!
+//! A [`Simulator`] fetches what every run against one model shares (its dynamics, its TEB table, the control
+//! period, the sensor) once; its runs are then independent of each other. A run is CPU work between server
+//! calls (RK4 sub-steps, A*, MPPI's rollouts, which make no call at all): [`Simulator::spawn_run`] runs it on
+//! a thread of its own, so that runs at once never starve the runtime's workers, and with them the
+//! connection every run's calls travel on.
 
 use crate::methods::{Context, Controller, Method, MethodError};
 use crate::tracker::{Disturbance, RangeSensor, Tracker};
@@ -12,6 +18,7 @@ use rand::rngs::StdRng;
 use rand::SeedableRng;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
+use tokio::task::JoinHandle;
 
 /// How a run is simulated.
 #[derive(Debug, Clone, PartialEq)]
@@ -28,8 +35,6 @@ pub struct RunSettings {
     pub sensor_range: Option<f64>,
     /// A push on the tracker the model does not know of (none by default).
     pub disturbance: Option<Disturbance>,
-    /// Seed of the method's and the disturbance's randomness.
-    pub seed: u64,
 }
 
 impl Default for RunSettings {
@@ -41,7 +46,6 @@ impl Default for RunSettings {
             time_limit: 120.0,
             sensor_range: None,
             disturbance: None,
-            seed: 1,
         }
     }
 }
@@ -140,147 +144,204 @@ pub struct Run {
     pub final_path: Vec<Point>,
 }
 
-/// Runs `method` through `world` against the server.
-pub async fn run(
-    client: &FastrackClient,
-    world: &World,
-    method: &Method,
-    settings: &RunSettings,
-) -> Result<Run, MethodError> {
-    let info = client.get_model(settings.model.clone()).await?;
-    let system = fastrack_valuefn::system::for_bundle(&info.system, info.params.len())
-        .ok_or_else(|| MethodError::Setup(format!("the simulator has no dynamics for system `{}`", info.system)))?;
-    let tracker = Arc::new(Tracker::new(system).map_err(MethodError::Setup)?);
-    let speeds: Vec<SpeedRow> = info.teb_table.iter().map(SpeedRow::from).collect();
-    let (steb, fastest) = match (speeds.first(), speeds.last()) {
-        (Some(first), Some(last)) => (first.level, last.level),
-        _ => return Err(MethodError::Setup("the model's TEB table is empty".into())),
-    };
-    let control_period = match settings.control_period {
-        Some(dt) => dt,
-        None => verification_step(&info)?,
-    };
-    if !(control_period.is_finite() && control_period > 0.0 && settings.substeps > 0) {
-        return Err(MethodError::Setup(format!(
-            "control period {control_period} s and {} sub-steps",
-            settings.substeps
-        )));
+/// What every run against one model shares, fetched from the server once.
+pub struct Simulator {
+    client: FastrackClient,
+    settings: RunSettings,
+    tracker: Arc<Tracker>,
+    speeds: Vec<SpeedRow>,
+    n_params: usize,
+    control_period: f64,
+    sensor: RangeSensor,
+}
+
+impl Simulator {
+    /// Fetches the model of `settings` and checks that runs can be simulated with it.
+    pub async fn connect(client: &FastrackClient, settings: RunSettings) -> Result<Self, MethodError> {
+        let info = client.get_model(settings.model.clone()).await?;
+        let system = fastrack_valuefn::system::for_bundle(&info.system, info.params.len())
+            .ok_or_else(|| MethodError::Setup(format!("the simulator has no dynamics for system `{}`", info.system)))?;
+        let tracker = Arc::new(Tracker::new(system).map_err(MethodError::Setup)?);
+        let speeds: Vec<SpeedRow> = info.teb_table.iter().map(SpeedRow::from).collect();
+        let Some(fastest) = speeds.last().map(|row| row.level) else {
+            return Err(MethodError::Setup("the model's TEB table is empty".into()));
+        };
+        let control_period = match settings.control_period {
+            Some(dt) => dt,
+            None => verification_step(&info)?,
+        };
+        if !(control_period.is_finite() && control_period > 0.0 && settings.substeps > 0) {
+            return Err(MethodError::Setup(format!(
+                "control period {control_period} s and {} sub-steps",
+                settings.substeps
+            )));
+        }
+        let sensor = RangeSensor { range: settings.sensor_range.unwrap_or(2.0 * fastest) };
+        if !(sensor.range.is_finite() && sensor.range > 0.0) {
+            return Err(MethodError::Setup(format!("sensor range {} m; must be finite and > 0", sensor.range)));
+        }
+        Ok(Self {
+            client: client.clone(),
+            settings,
+            tracker,
+            speeds,
+            n_params: info.params.len(),
+            control_period,
+            sensor,
+        })
     }
-    let sensor = RangeSensor { range: settings.sensor_range.unwrap_or(2.0 * fastest) };
-    let context = Context {
-        client: client.clone(),
-        model: settings.model.clone(),
-        speeds,
-        n_params: info.params.len(),
-        tracker: Arc::clone(&tracker),
-        world: Arc::new(world.clone()),
-        control_period,
-        seed: settings.seed,
-    };
-    let mut s = tracker
-        .initial_state(world.start, &[("theta", world.start_heading), ("v", world.start_speed)])
-        .map_err(MethodError::Setup)?;
-    let started = Controller::start(method, context, &s).await;
-    let mut rng = StdRng::seed_from_u64(settings.seed ^ 0xD15_7A6B);
-    let mut run = Run {
-        method: method.label(),
-        outcome: Outcome::TimedOut,
-        time: 0.0,
-        samples: Vec::new(),
-        min_clearance: clearance(&world.obstacles, world.start),
-        worst_excess: None,
-        replans: 0,
-        resets: 0,
-        round_trips: 0,
-        out_of_domain: 0,
-        decision_times: Vec::new(),
-        sensor_range: sensor.range,
-        steb_radius: steb,
-        control_period,
-        final_path: Vec::new(),
-    };
-    // A method that cannot start on the server (its stream refused, a call timed out) is a failed run,
-    // not a failed benchmark; a method that cannot run on this model at all is an error.
-    let mut controller = match started {
-        Ok(controller) => controller,
-        Err(MethodError::Setup(why)) => return Err(MethodError::Setup(why)),
-        Err(e) => {
-            run.outcome = Outcome::Failed(e.to_string());
-            return Ok(run);
-        }
-    };
-    let steps = (settings.time_limit / control_period).ceil() as usize;
-    let mut push = [0.0, 0.0];
-    for k in 0..steps {
-        let t = k as f64 * control_period;
-        let position = tracker.position(&s);
-        if norm(sub(position, world.goal)) <= world.goal_radius {
-            run.outcome = Outcome::Reached;
-            run.time = t;
-            break;
-        }
-        let sensed = sensor.sense(&world.obstacles, position);
-        let started = Instant::now();
-        let decision = match controller.step(&s, &sensed).await {
-            Ok(decision) => decision,
+
+    /// The model's TEB table as the planner-speed rules read it, slowest row first.
+    pub fn speeds(&self) -> &[SpeedRow] {
+        &self.speeds
+    }
+
+    /// The sTEB radius (m): the bound at `beta_l`, by which worlds must be feasible.
+    pub fn steb_radius(&self) -> f64 {
+        self.speeds[0].level
+    }
+
+    /// The control period of every run (s).
+    pub fn control_period(&self) -> f64 {
+        self.control_period
+    }
+
+    /// The sensing range of every run (m).
+    pub fn sensor_range(&self) -> f64 {
+        self.sensor.range
+    }
+
+    /// Runs `method` through `world` on a thread of its own (see the module's doc), its randomness seeded
+    /// by `seed`.
+    pub fn spawn_run(
+        self: &Arc<Self>,
+        world: World,
+        method: Method,
+        seed: u64,
+    ) -> JoinHandle<Result<Run, MethodError>> {
+        let (simulator, runtime) = (Arc::clone(self), tokio::runtime::Handle::current());
+        tokio::task::spawn_blocking(move || runtime.block_on(simulator.run(&world, &method, seed)))
+    }
+
+    /// Runs `method` through `world`, its randomness seeded by `seed`. Whatever the server does, the run
+    /// ends with an [`Outcome`]; an error means only that the method cannot run on this model.
+    pub async fn run(&self, world: &World, method: &Method, seed: u64) -> Result<Run, MethodError> {
+        let (tracker, settings, control_period) = (&self.tracker, &self.settings, self.control_period);
+        let context = Context {
+            client: self.client.clone(),
+            model: settings.model.clone(),
+            speeds: self.speeds.clone(),
+            n_params: self.n_params,
+            tracker: Arc::clone(tracker),
+            world: Arc::new(world.clone()),
+            control_period,
+            seed,
+        };
+        let mut s = tracker
+            .initial_state(world.start, &[("theta", world.start_heading), ("v", world.start_speed)])
+            .map_err(MethodError::Setup)?;
+        let started = Controller::start(method, context, &s).await;
+        let mut rng = StdRng::seed_from_u64(seed ^ 0xD15_7A6B);
+        let mut run = Run {
+            method: method.label(),
+            outcome: Outcome::TimedOut,
+            time: 0.0,
+            samples: Vec::new(),
+            min_clearance: clearance(&world.obstacles, world.start),
+            worst_excess: None,
+            replans: 0,
+            resets: 0,
+            round_trips: 0,
+            out_of_domain: 0,
+            decision_times: Vec::new(),
+            sensor_range: self.sensor.range,
+            steb_radius: self.steb_radius(),
+            control_period,
+            final_path: Vec::new(),
+        };
+        // A method that cannot start on the server (its stream refused, a call timed out) is a failed run,
+        // not a failed benchmark; a method that cannot run on this model at all is an error.
+        let mut controller = match started {
+            Ok(controller) => controller,
+            Err(MethodError::Setup(why)) => return Err(MethodError::Setup(why)),
             Err(e) => {
                 run.outcome = Outcome::Failed(e.to_string());
+                return Ok(run);
+            }
+        };
+        let steps = (settings.time_limit / control_period).ceil() as usize;
+        let mut push = [0.0, 0.0];
+        for k in 0..steps {
+            let t = k as f64 * control_period;
+            let position = tracker.position(&s);
+            if norm(sub(position, world.goal)) <= world.goal_radius {
+                run.outcome = Outcome::Reached;
                 run.time = t;
                 break;
             }
-        };
-        run.decision_times.push(started.elapsed());
-        run.replans += usize::from(decision.replanned);
-        run.resets += usize::from(decision.reset);
-        run.round_trips += decision.round_trips;
-        run.out_of_domain += usize::from(decision.out_of_domain);
-        if let Some(disturbance) = &settings.disturbance {
-            if (t / disturbance.period).floor() != ((t - control_period) / disturbance.period).floor() || k == 0 {
-                push = disturbance.draw(&mut rng);
-            }
-        }
-        let (mut period_clearance, mut period_error) = (f64::INFINITY, None::<f64>);
-        let mut failure = None;
-        tracker.step(&mut s, &decision.control, push, control_period, settings.substeps, |x| {
-            let p = tracker.position(x);
-            let gap = clearance(&world.obstacles, p);
-            period_clearance = period_clearance.min(gap);
-            if gap <= 0.0 {
-                failure = Some(Outcome::Collided);
-                return false;
-            }
-            if let (Some(planner), Some(bound)) = (decision.planner, decision.bound) {
-                let error = tracker.tracking_error(x, planner);
-                period_error = Some(period_error.map_or(error, |e| e.max(error)));
-                let excess = error - bound;
-                run.worst_excess = Some(run.worst_excess.map_or(excess, |w| w.max(excess)));
-                if excess > 1e-9 {
-                    failure = Some(Outcome::BoundExceeded { error, bound });
-                    return false;
+            let sensed = self.sensor.sense(&world.obstacles, position);
+            let started = Instant::now();
+            let decision = match controller.step(&s, &sensed).await {
+                Ok(decision) => decision,
+                Err(e) => {
+                    run.outcome = Outcome::Failed(e.to_string());
+                    run.time = t;
+                    break;
+                }
+            };
+            run.decision_times.push(started.elapsed());
+            run.replans += usize::from(decision.replanned);
+            run.resets += usize::from(decision.reset);
+            run.round_trips += decision.round_trips;
+            run.out_of_domain += usize::from(decision.out_of_domain);
+            if let Some(disturbance) = &settings.disturbance {
+                if (t / disturbance.period).floor() != ((t - control_period) / disturbance.period).floor() || k == 0 {
+                    push = disturbance.draw(&mut rng);
                 }
             }
-            true
-        });
-        run.min_clearance = run.min_clearance.min(period_clearance);
-        run.samples.push(Sample {
-            t: t + control_period,
-            position: tracker.position(&s),
-            planner: decision.planner,
-            beta: decision.beta,
-            bound: decision.bound,
-            error: period_error,
-            clearance: period_clearance,
-            sensed: sensed.len(),
-        });
-        if let Some(outcome) = failure {
-            run.outcome = outcome;
+            let (mut period_clearance, mut period_error) = (f64::INFINITY, None::<f64>);
+            let mut failure = None;
+            tracker.step(&mut s, &decision.control, push, control_period, settings.substeps, |x| {
+                let p = tracker.position(x);
+                let gap = clearance(&world.obstacles, p);
+                period_clearance = period_clearance.min(gap);
+                if gap <= 0.0 {
+                    failure = Some(Outcome::Collided);
+                    return false;
+                }
+                if let (Some(planner), Some(bound)) = (decision.planner, decision.bound) {
+                    let error = tracker.tracking_error(x, planner);
+                    period_error = Some(period_error.map_or(error, |e| e.max(error)));
+                    let excess = error - bound;
+                    run.worst_excess = Some(run.worst_excess.map_or(excess, |w| w.max(excess)));
+                    if excess > 1e-9 {
+                        failure = Some(Outcome::BoundExceeded { error, bound });
+                        return false;
+                    }
+                }
+                true
+            });
+            run.min_clearance = run.min_clearance.min(period_clearance);
+            run.samples.push(Sample {
+                t: t + control_period,
+                position: tracker.position(&s),
+                planner: decision.planner,
+                beta: decision.beta,
+                bound: decision.bound,
+                error: period_error,
+                clearance: period_clearance,
+                sensed: sensed.len(),
+            });
+            if let Some(outcome) = failure {
+                run.outcome = outcome;
+                run.time = t + control_period;
+                break;
+            }
             run.time = t + control_period;
-            break;
         }
-        run.time = t + control_period;
+        run.final_path = controller.raw_path();
+        Ok(run)
     }
-    run.final_path = controller.raw_path();
-    Ok(run)
 }
 
 /// The integration step the model's verification used (every verified row records it).

@@ -3,23 +3,23 @@
 //! (checked at every sub-step); the baselines run through the same worlds with the same sensor, dynamics and
 //! control period, the reachability-based ones as safely.
 
-use fastrack_client::FastrackClient;
 use fastrack_e2e::TestServer;
-use fastrack_proto::planner_speed::SpeedRow;
 use fastrack_sim::bench::{summarise, table, time_ratio};
-use fastrack_sim::episode::{run, Outcome, Run, RunSettings};
-use fastrack_sim::methods::Method;
+use fastrack_sim::episode::{Outcome, Run, RunSettings, Simulator};
+use fastrack_sim::methods::{Method, MppiSettings};
 use fastrack_sim::world::{World, WorldSpec};
 use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
 
 /// Worlds of the CI run (the recorded benchmark runs 200).
 const WORLDS: u64 = 20;
 
-async fn shipped() -> (TestServer, FastrackClient, f64) {
+async fn shipped() -> (TestServer, Arc<Simulator>) {
     let (server, client) = TestServer::start_serving(&Path::new(env!("CARGO_MANIFEST_DIR")).join("../models")).await;
-    let info = client.get_model(fastrack_client::model_ref("dubins4d", 0)).await.unwrap();
-    let steb = SpeedRow::from(&info.teb_table[0]).level;
-    (server, client, steb)
+    let simulator = Simulator::connect(&client, RunSettings::default()).await.unwrap();
+    (server, Arc::new(simulator))
 }
 
 fn worlds(count: u64, steb: f64) -> Vec<World> {
@@ -28,11 +28,10 @@ fn worlds(count: u64, steb: f64) -> Vec<World> {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn parametric_fastrack_reaches_every_goal_safely_on_twenty_worlds() {
-    let (_server, client, steb) = shipped().await;
+    let (_server, simulator) = shipped().await;
     let mut runs = Vec::new();
-    for (i, world) in worlds(WORLDS, steb).iter().enumerate() {
-        let settings = RunSettings { seed: i as u64 + 1, ..RunSettings::default() };
-        let done = run(&client, world, &Method::Parametric, &settings).await.unwrap();
+    for (i, world) in worlds(WORLDS, simulator.steb_radius()).into_iter().enumerate() {
+        let done = simulator.spawn_run(world, Method::Parametric, i as u64 + 1).await.unwrap().unwrap();
         assert_eq!(done.outcome, Outcome::Reached, "world {}: {:?} after {:.1} s", i + 1, done.outcome, done.time);
         assert!(done.min_clearance > 0.0, "world {}", i + 1);
         assert!(
@@ -60,14 +59,13 @@ async fn parametric_fastrack_reaches_every_goal_safely_on_twenty_worlds() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_baselines_run_the_same_worlds_and_the_bounded_ones_stay_safe() {
-    let (_server, client, steb) = shipped().await;
-    let worlds = worlds(3, steb);
+    let (_server, simulator) = shipped().await;
+    let worlds = worlds(3, simulator.steb_radius());
     let mut by_method: Vec<(Method, Vec<Run>)> = Vec::new();
     for method in Method::all() {
         let mut runs = Vec::new();
         for (i, world) in worlds.iter().enumerate() {
-            let settings = RunSettings { seed: i as u64 + 1, ..RunSettings::default() };
-            runs.push(run(&client, world, &method, &settings).await.unwrap());
+            runs.push(simulator.spawn_run(world.clone(), method.clone(), i as u64 + 1).await.unwrap().unwrap());
         }
         by_method.push((method, runs));
     }
@@ -99,12 +97,9 @@ async fn the_baselines_run_the_same_worlds_and_the_bounded_ones_stay_safe() {
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_server_that_goes_away_mid_run_ends_the_run_with_a_reason() {
-    let (mut server, client, steb) = shipped().await;
-    let world = &worlds(1, steb)[0];
-    let handle = {
-        let (client, world) = (client.clone(), world.clone());
-        tokio::spawn(async move { run(&client, &world, &Method::Parametric, &RunSettings::default()).await })
-    };
+    let (mut server, simulator) = shipped().await;
+    let world = worlds(1, simulator.steb_radius()).remove(0);
+    let handle = simulator.spawn_run(world, Method::Parametric, 1);
     tokio::time::sleep(std::time::Duration::from_millis(300)).await;
     server.terminate();
     let done = handle.await.unwrap().unwrap();
@@ -113,4 +108,37 @@ async fn a_server_that_goes_away_mid_run_ends_the_run_with_a_reason() {
         Outcome::Reached => panic!("the run finished in 300 ms: the test needs a longer world"),
         other => panic!("expected a failure naming the server, got {other:?}"),
     }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 1)]
+async fn a_run_never_holds_up_the_runtime_it_was_started_from() {
+    // MPPI makes no server call: run as a task, it would hold the runtime's only worker for the whole run,
+    // and with it every other task (the connection's among them). Run by spawn_run, a ticker task on that
+    // worker keeps its 10 ms pace.
+    let (_server, simulator) = shipped().await;
+    let world = worlds(1, simulator.steb_radius()).remove(0);
+    let finished = Arc::new(AtomicBool::new(false));
+    let ticker = {
+        let finished = Arc::clone(&finished);
+        tokio::spawn(async move {
+            let mut ticker = tokio::time::interval(Duration::from_millis(10));
+            let (mut last, mut longest_gap) = (Instant::now(), Duration::ZERO);
+            while !finished.load(Ordering::SeqCst) {
+                ticker.tick().await;
+                longest_gap = longest_gap.max(last.elapsed());
+                last = Instant::now();
+            }
+            longest_gap
+        })
+    };
+    let started = Instant::now();
+    // 1024 samples, four times the default: a run long enough to tell a held worker from a busy one.
+    let mppi = Method::Mppi(MppiSettings { samples: 1024, ..MppiSettings::default() });
+    let done = simulator.spawn_run(world, mppi, 1).await.unwrap().unwrap();
+    let wall = started.elapsed();
+    finished.store(true, Ordering::SeqCst);
+    let longest_gap = ticker.await.unwrap();
+    assert_eq!(done.method, "MPPI");
+    assert!(wall.as_secs_f64() > 1.0, "the run took {wall:?}: too short to tell");
+    assert!(longest_gap.as_secs_f64() < 0.25, "the ticker waited {longest_gap:?} during a run of {wall:?}");
 }

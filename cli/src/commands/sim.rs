@@ -8,7 +8,7 @@ use fastrack_cli::load_generator::LatencySummary;
 use fastrack_client::{model_ref, FastrackClient};
 use fastrack_proto::planner_speed::SpeedRow;
 use fastrack_sim::bench::{paper_comparison, summarise, summary_json, table, time_ratio, Summary};
-use fastrack_sim::episode::{run, Outcome, Run, RunSettings};
+use fastrack_sim::episode::{Outcome, Run, RunSettings, Simulator};
 use fastrack_sim::methods::Method;
 use fastrack_sim::plot::{methods_on_one_world, over_time, time_to_goal, trajectory};
 use fastrack_sim::tracker::Disturbance;
@@ -65,7 +65,7 @@ struct Simulation {
 }
 
 impl Simulation {
-    fn settings(&self, seed: u64) -> RunSettings {
+    fn settings(&self) -> RunSettings {
         RunSettings {
             model: model_ref(&self.model, 0),
             control_period: self.control_period,
@@ -73,8 +73,13 @@ impl Simulation {
             time_limit: self.time_limit,
             sensor_range: self.sensor_range,
             disturbance: self.disturbance.map(|bound| Disturbance { bound, period: 0.5 }),
-            seed,
         }
+    }
+
+    /// The simulator of these settings, its model fetched from the server.
+    async fn connect(&self, client: &FastrackClient) -> anyhow::Result<Arc<Simulator>> {
+        let simulator = Simulator::connect(client, self.settings()).await;
+        Ok(Arc::new(simulator.with_context(|| format!("preparing runs of model {}", self.model))?))
     }
 }
 
@@ -243,14 +248,15 @@ fn run_line(run: &Run) -> String {
 }
 
 async fn run_one(client: &FastrackClient, args: RunArgs, json_mode: bool) -> anyhow::Result<()> {
-    let table = speeds(client, &args.simulation.model).await?;
-    let world = world_of(args.world.as_ref(), &args.generation, args.seed, table[0].level)?;
+    let simulator = args.simulation.connect(client).await?;
+    let beta_l = simulator.speeds()[0].beta;
+    let world = world_of(args.world.as_ref(), &args.generation, args.seed, simulator.steb_radius())?;
     let method = Method::parse(&args.method).map_err(anyhow::Error::msg)?;
-    let run = run(client, &world, &method, &args.simulation.settings(args.seed)).await?;
+    let run = simulator.spawn_run(world.clone(), method, args.seed).await.context("the run's thread failed")??;
     if let Some(dir) = args.plot.parent() {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
-    trajectory(&args.plot, &world, &run, table[0].beta, 2.0).map_err(anyhow::Error::msg)?;
+    trajectory(&args.plot, &world, &run, beta_l, 2.0).map_err(anyhow::Error::msg)?;
     let over = args.plot.with_extension("time.png");
     over_time(&over, &run).map_err(anyhow::Error::msg)?;
     print(
@@ -266,11 +272,11 @@ async fn run_one(client: &FastrackClient, args: RunArgs, json_mode: bool) -> any
 
 async fn bench(client: &FastrackClient, args: BenchArgs, json_mode: bool) -> anyhow::Result<()> {
     anyhow::ensure!(args.worlds > 0, "--worlds must be at least 1");
-    let table_rows = speeds(client, &args.simulation.model).await?;
+    let simulator = args.simulation.connect(client).await?;
     let methods: Vec<Method> =
         args.methods.iter().map(|m| Method::parse(m)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
     let worlds: Vec<World> = (1..=args.worlds)
-        .map(|seed| world_of(None, &args.generation, seed, table_rows[0].level))
+        .map(|seed| world_of(None, &args.generation, seed, simulator.steb_radius()))
         .collect::<anyhow::Result<_>>()?;
     let bar = ProgressBar::new(args.worlds * methods.len() as u64).with_style(
         ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} runs {msg}")?.progress_chars("=> "),
@@ -281,12 +287,13 @@ async fn bench(client: &FastrackClient, args: BenchArgs, json_mode: bool) -> any
     let mut tasks = Vec::new();
     for (w, world) in worlds.iter().enumerate() {
         for (m, method) in methods.iter().enumerate() {
-            let (client, world, method, bar) = (client.clone(), world.clone(), method.clone(), bar.clone());
-            let (settings, slots) = (args.simulation.settings(w as u64 + 1), Arc::clone(&slots));
+            let (simulator, world, method, bar) = (Arc::clone(&simulator), world.clone(), method.clone(), bar.clone());
+            let slots = Arc::clone(&slots);
             tasks.push(tokio::spawn(async move {
                 let _slot = slots.acquire_owned().await?;
-                let done = run(&client, &world, &method, &settings).await;
-                bar.set_message(format!("world {} {}", w + 1, method.label()));
+                let label = method.label();
+                let done = simulator.spawn_run(world, method, w as u64 + 1).await.context("a run's thread failed")?;
+                bar.set_message(format!("world {} {label}", w + 1));
                 bar.inc(1);
                 anyhow::Ok((m, done?))
             }));
@@ -340,8 +347,8 @@ async fn bench(client: &FastrackClient, args: BenchArgs, json_mode: bool) -> any
             name,
             &command,
             json!({"model": args.simulation.model, "worlds": args.worlds, "methods": args.methods, "jobs": args.jobs,
-                   "control_period_s": runs.first().map(|(_, r)| r.control_period), "substeps": args.simulation.substeps,
-                   "sensor_range_m": runs.first().map(|(_, r)| r.sensor_range), "time_limit_s": args.simulation.time_limit,
+                   "control_period_s": simulator.control_period(), "substeps": args.simulation.substeps,
+                   "sensor_range_m": simulator.sensor_range(), "time_limit_s": args.simulation.time_limit,
                    "world": {"size": args.generation.size, "density": args.generation.density, "size_range": args.generation.size_range}}),
             json!({"summaries": summaries.iter().map(summary_json).collect::<Vec<_>>(),
                    "pf_time_ratios": ratios.iter().map(|(l, r)| json!({"against": l, "ratio": r.map(|x| x.0), "worlds": r.map(|x| x.1)})).collect::<Vec<_>>(),
@@ -364,22 +371,19 @@ async fn bench(client: &FastrackClient, args: BenchArgs, json_mode: bool) -> any
 }
 
 async fn fleet(client: &FastrackClient, args: FleetArgs, json_mode: bool) -> anyhow::Result<()> {
-    let table_rows = speeds(client, &args.simulation.model).await?;
+    let simulator = args.simulation.connect(client).await?;
     let mut lines = Vec::new();
     let mut figures = Vec::new();
     for &robots in &args.robots {
         anyhow::ensure!(robots > 0, "--robots takes counts of at least 1");
         let worlds: Vec<World> = (1..=robots as u64)
-            .map(|seed| world_of(None, &args.generation, seed, table_rows[0].level))
+            .map(|seed| world_of(None, &args.generation, seed, simulator.steb_radius()))
             .collect::<anyhow::Result<_>>()?;
         let started = Instant::now();
         let tasks: Vec<_> = worlds
             .into_iter()
             .enumerate()
-            .map(|(i, world)| {
-                let (client, settings) = (client.clone(), args.simulation.settings(i as u64 + 1));
-                tokio::spawn(async move { run(&client, &world, &Method::Parametric, &settings).await })
-            })
+            .map(|(i, world)| simulator.spawn_run(world, Method::Parametric, i as u64 + 1))
             .collect();
         let mut done = Vec::new();
         for task in tasks {
