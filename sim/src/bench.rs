@@ -1,11 +1,120 @@
 //! The benchmark of the paper's Table 1: every method through the same seeded worlds, summarised per
 //! method (reached, collisions, bounds exceeded, time to goal, clearance, replans, resets, ticks, decision
-//! latency), beside the paper's figures.
+//! latency), beside the paper's figures. A benchmark may be split into shards of worlds (`--shard`), each
+//! writing a [`BenchPart`]; merged, the parts give the runs a single process gives.
 
 use crate::episode::{Outcome, Run};
 use fastrack_valuefn::record::Table;
+use fastrack_valuefn::shard::Shard;
+use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
+use std::path::{Path, PathBuf};
 use std::time::Duration;
+
+/// The world whose runs the benchmark's figure shows; the others keep no samples.
+pub const FIGURE_WORLD: u64 = 1;
+
+/// File-name stem of the benchmark's parts.
+const PART_STEM: &str = "sim-bench";
+
+/// One run of a benchmark.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BenchRun {
+    /// The world's seed (worlds 1..=N).
+    pub world: u64,
+    /// The method's position in the benchmark's list of methods.
+    pub method: usize,
+    /// The run; its per-period samples only on [`FIGURE_WORLD`].
+    pub run: Run,
+}
+
+impl BenchRun {
+    /// The run of `method` on `world`, its samples dropped unless the figure shows that world.
+    pub fn new(world: u64, method: usize, mut run: Run) -> Self {
+        if world != FIGURE_WORLD {
+            run.samples = Vec::new();
+        }
+        Self { world, method, run }
+    }
+}
+
+/// What one shard of a benchmark ran: its configuration (the same for every shard of a split) and runs.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct BenchPart {
+    /// Everything that decides the runs: model, worlds, methods, simulation settings.
+    pub config: Value,
+    /// Which shard.
+    pub shard: Shard,
+    /// Wall time of the shard (s).
+    pub wall_s: f64,
+    /// Its runs.
+    pub runs: Vec<BenchRun>,
+}
+
+/// Parts that cannot be merged.
+#[derive(Debug, thiserror::Error)]
+pub enum MergeError {
+    /// A part could not be read.
+    #[error("{path}: {why}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        why: String,
+    },
+    /// The parts do not form one split of one benchmark.
+    #[error("the parts in {dir} do not make one benchmark: {why}")]
+    Mismatch {
+        /// The folder.
+        dir: PathBuf,
+        /// Why.
+        why: String,
+    },
+}
+
+impl BenchPart {
+    /// Writes the part into `dir` as `sim-bench-part-<index>-of-<count>.json`.
+    pub fn write(&self, dir: &Path) -> std::io::Result<PathBuf> {
+        std::fs::create_dir_all(dir)?;
+        let path = dir.join(self.shard.part_file_name(PART_STEM));
+        std::fs::write(&path, serde_json::to_vec(self)?)?;
+        Ok(path)
+    }
+
+    /// Reads every part in `dir` and merges them: one configuration, every shard once; returns the
+    /// configuration, the runs ordered by world and method, and the longest shard's wall time.
+    pub fn merge(dir: &Path) -> Result<(Value, Vec<BenchRun>, f64), MergeError> {
+        let mismatch = |why: String| MergeError::Mismatch { dir: dir.to_path_buf(), why };
+        let read_error = |path: &Path, why: String| MergeError::Read { path: path.to_path_buf(), why };
+        let entries = std::fs::read_dir(dir).map_err(|e| read_error(dir, e.to_string()))?;
+        let mut paths: Vec<PathBuf> = entries
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| {
+                p.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.starts_with(PART_STEM) && n.ends_with(".json"))
+            })
+            .collect();
+        paths.sort();
+        let mut parts = Vec::with_capacity(paths.len());
+        for path in &paths {
+            let bytes = std::fs::read(path).map_err(|e| read_error(path, e.to_string()))?;
+            let part: BenchPart = serde_json::from_slice(&bytes).map_err(|e| read_error(path, e.to_string()))?;
+            parts.push(part);
+        }
+        let shards: Vec<Shard> = parts.iter().map(|p| p.shard).collect();
+        Shard::check_complete(&shards).map_err(&mismatch)?;
+        let config = parts[0].config.clone();
+        if let Some(other) = parts.iter().find(|p| p.config != config) {
+            return Err(mismatch(format!(
+                "shard {} ran {} where shard {} ran {}",
+                other.shard, other.config, parts[0].shard, config
+            )));
+        }
+        let wall_s = parts.iter().map(|p| p.wall_s).fold(0.0, f64::max);
+        let mut runs: Vec<BenchRun> = parts.into_iter().flat_map(|p| p.runs).collect();
+        runs.sort_by_key(|r| (r.world, r.method));
+        Ok((config, runs, wall_s))
+    }
+}
 
 /// The paper's Table 1 (20 runs): reached %, collision %, solution time (s), by method label.
 pub const PAPER_TABLE: [(&str, f64, f64, f64); 4] = [
@@ -19,7 +128,7 @@ pub const PAPER_TABLE: [(&str, f64, f64, f64); 4] = [
 #[derive(Debug, Clone, PartialEq)]
 pub struct Summary {
     /// The method.
-    pub method: &'static str,
+    pub method: String,
     /// Runs.
     pub runs: usize,
     /// Runs that reached the goal.
@@ -51,7 +160,7 @@ pub struct Summary {
 }
 
 /// Summarises the runs of one method.
-pub fn summarise(method: &'static str, runs: &[&Run]) -> Summary {
+pub fn summarise(method: &str, runs: &[&Run]) -> Summary {
     let count = |f: &dyn Fn(&Outcome) -> bool| runs.iter().filter(|r| f(&r.outcome)).count();
     let times: Vec<f64> = runs.iter().filter(|r| r.outcome == Outcome::Reached).map(|r| r.time).collect();
     let time_to_goal = (!times.is_empty()).then(|| {
@@ -66,7 +175,7 @@ pub fn summarise(method: &'static str, runs: &[&Run]) -> Summary {
     };
     let mean = |f: &dyn Fn(&Run) -> usize| runs.iter().map(|r| f(r) as f64).sum::<f64>() / runs.len().max(1) as f64;
     Summary {
-        method,
+        method: method.to_string(),
         runs: runs.len(),
         reached: count(&|o| *o == Outcome::Reached),
         collided: count(&|o| *o == Outcome::Collided),
@@ -108,7 +217,7 @@ pub fn table(summaries: &[Summary]) -> Table {
     ]);
     for s in summaries {
         table.row(vec![
-            s.method.to_string(),
+            s.method.clone(),
             s.runs.to_string(),
             format!("{:.0}", percent(s.reached, s.runs)),
             format!("{:.0}", percent(s.collided, s.runs)),
@@ -137,7 +246,7 @@ pub fn paper_comparison(summaries: &[Summary]) -> Table {
             paper.map_or("-".into(), |p| format!("{:.*}", digits, f(p)))
         };
         table.row(vec![
-            s.method.to_string(),
+            s.method.clone(),
             cell(|p| p.1, 0),
             format!("{:.0}", percent(s.reached, s.runs)),
             cell(|p| p.2, 0),

@@ -16,6 +16,7 @@ use fastrack_online::geometry::{clearance, norm, sub, Point};
 use fastrack_proto::planner_speed::SpeedRow;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
+use serde::{Deserialize, Serialize};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::task::JoinHandle;
@@ -51,7 +52,7 @@ impl Default for RunSettings {
 }
 
 /// How a run ended.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub enum Outcome {
     /// The tracker reached the goal.
     Reached,
@@ -89,7 +90,7 @@ impl Outcome {
 }
 
 /// The state of the run after one control period.
-#[derive(Debug, Clone, PartialEq)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Sample {
     /// Time at the end of the period (s).
     pub t: f64,
@@ -110,10 +111,10 @@ pub struct Sample {
 }
 
 /// A finished run.
-#[derive(Debug, Clone)]
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct Run {
     /// The method's label.
-    pub method: &'static str,
+    pub method: String,
     /// How it ended.
     pub outcome: Outcome,
     /// Time when it ended (s): the time to goal when reached.
@@ -133,6 +134,7 @@ pub struct Run {
     /// Control periods whose control was read outside the model's trained domain (extrapolated).
     pub out_of_domain: usize,
     /// The method's decision time per control period, server calls included.
+    #[serde(with = "nanoseconds")]
     pub decision_times: Vec<Duration>,
     /// The sensing range used (m).
     pub sensor_range: f64,
@@ -243,7 +245,7 @@ impl Simulator {
         let started = Controller::start(method, context, &s).await;
         let mut rng = StdRng::seed_from_u64(seed ^ 0xD15_7A6B);
         let mut run = Run {
-            method: method.label(),
+            method: method.label().to_string(),
             outcome: Outcome::TimedOut,
             time: 0.0,
             samples: Vec::new(),
@@ -352,4 +354,22 @@ fn verification_step(info: &pb::ModelInfo) -> Result<f64, MethodError> {
         .as_array()
         .and_then(|rows| rows.iter().find_map(|row| row["verification"]["step"].as_f64()))
         .ok_or_else(|| MethodError::Setup("the model is not verified: give the control period".into()))
+}
+
+/// Durations as whole nanoseconds, for records of runs.
+mod nanoseconds {
+    use serde::{Deserialize, Deserializer, Serialize, Serializer};
+    use std::time::Duration;
+
+    pub fn serialize<S: Serializer>(times: &[Duration], serializer: S) -> Result<S::Ok, S::Error> {
+        times
+            .iter()
+            .map(|t| u64::try_from(t.as_nanos()).unwrap_or(u64::MAX))
+            .collect::<Vec<u64>>()
+            .serialize(serializer)
+    }
+
+    pub fn deserialize<'de, D: Deserializer<'de>>(deserializer: D) -> Result<Vec<Duration>, D::Error> {
+        Ok(Vec::<u64>::deserialize(deserializer)?.into_iter().map(Duration::from_nanos).collect())
+    }
 }

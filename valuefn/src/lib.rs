@@ -7,6 +7,7 @@
 //! - [`record`]: measurement records under `bench/results/`.
 //! - [`teb`]: TEB tables from a value function (`V_min` per `beta`, extent, boundary).
 //! - [`simulation`]: RK4 with held inputs and the planner models every rollout shares.
+//! - [`shard`]: `--shard INDEX/COUNT` for batch work split among processes (Kubernetes Indexed Jobs).
 //! - `onnx_writer` (feature `writer`): the network plus control law as an ONNX graph.
 //! - `plot` (feature `plot`): PNG line charts.
 //! - `runtime` (feature `runtime`): ONNX Runtime loading and a pooled batch evaluator.
@@ -16,6 +17,7 @@ pub mod manifest;
 pub mod network;
 pub mod provenance;
 pub mod record;
+pub mod shard;
 pub mod simulation;
 pub mod system;
 pub mod teb;

@@ -7,13 +7,16 @@ use anyhow::Context as _;
 use fastrack_cli::load_generator::LatencySummary;
 use fastrack_client::{model_ref, FastrackClient};
 use fastrack_proto::planner_speed::SpeedRow;
-use fastrack_sim::bench::{paper_comparison, summarise, summary_json, table, time_ratio, Summary};
+use fastrack_sim::bench::{
+    paper_comparison, summarise, summary_json, table, time_ratio, BenchPart, BenchRun, Summary, FIGURE_WORLD,
+};
 use fastrack_sim::episode::{Outcome, Run, RunSettings, Simulator};
 use fastrack_sim::methods::Method;
 use fastrack_sim::plot::{methods_on_one_world, over_time, time_to_goal, trajectory};
 use fastrack_sim::tracker::Disturbance;
 use fastrack_sim::world::{World, WorldSpec};
 use fastrack_valuefn::record::write_record;
+use fastrack_valuefn::shard::Shard;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use std::path::PathBuf;
@@ -34,6 +37,8 @@ enum SimCommand {
     Run(RunArgs),
     /// Seeded worlds x methods: the paper's Table 1 beside ours, a record and figures.
     Bench(BenchArgs),
+    /// Merges the parts of a sharded `sim bench` into the tables and record a single run gives.
+    Merge(MergeArgs),
     /// Parametric FaSTrack robots on seeded worlds, all at once on one server: ticks/s and latency.
     Fleet(FleetArgs),
     /// Generates a world from a seed, or checks a world file.
@@ -84,7 +89,7 @@ impl Simulation {
 }
 
 /// How generated worlds look.
-#[derive(clap::Args)]
+#[derive(clap::Args, serde::Deserialize)]
 struct Generation {
     /// Workspace width and height (m).
     #[arg(long, value_delimiter = ',', default_value = "30,20", num_args = 1)]
@@ -156,12 +161,29 @@ struct BenchArgs {
     /// others' load on the machine.
     #[arg(long, default_value_t = 1)]
     jobs: usize,
+    /// Only this shard of the worlds, `INDEX/COUNT` (world `w` goes to shard `(w - 1) % COUNT`), or `COUNT`
+    /// with the index from `JOB_COMPLETION_INDEX` (a Kubernetes Indexed Job); writes a part (--part-dir)
+    /// for `sim merge` instead of a record.
+    #[arg(long)]
+    shard: Option<Shard>,
+    /// Folder the shard's part is written into, as `sim-bench-part-<index>-of-<count>.json`.
+    #[arg(long)]
+    part_dir: Option<PathBuf>,
     #[command(flatten)]
     recording: Recording,
     #[command(flatten)]
     simulation: Simulation,
     #[command(flatten)]
     generation: Generation,
+}
+
+#[derive(clap::Args)]
+struct MergeArgs {
+    /// Folder holding every shard's part.
+    #[arg(long)]
+    part_dir: PathBuf,
+    #[command(flatten)]
+    recording: Recording,
 }
 
 #[derive(clap::Args)]
@@ -197,12 +219,12 @@ struct WorldArgs {
 
 /// Runs `fastrack sim ...`.
 pub async fn run_command(server: &Server, args: Args, json_mode: bool) -> anyhow::Result<()> {
-    let client = server.connect().await?;
     match args.command {
-        SimCommand::Run(args) => run_one(&client, args, json_mode).await,
-        SimCommand::Bench(args) => bench(&client, args, json_mode).await,
-        SimCommand::Fleet(args) => fleet(&client, args, json_mode).await,
-        SimCommand::World(args) => world(&client, args, json_mode).await,
+        SimCommand::Run(args) => run_one(&server.connect().await?, args, json_mode).await,
+        SimCommand::Bench(args) => bench(&server.connect().await?, args, json_mode).await,
+        SimCommand::Merge(args) => merge(args, json_mode),
+        SimCommand::Fleet(args) => fleet(&server.connect().await?, args, json_mode).await,
+        SimCommand::World(args) => world(&server.connect().await?, args, json_mode).await,
     }
 }
 
@@ -272,39 +294,112 @@ async fn run_one(client: &FastrackClient, args: RunArgs, json_mode: bool) -> any
 
 async fn bench(client: &FastrackClient, args: BenchArgs, json_mode: bool) -> anyhow::Result<()> {
     anyhow::ensure!(args.worlds > 0, "--worlds must be at least 1");
+    anyhow::ensure!(args.jobs > 0, "--jobs must be at least 1");
+    let shard = args.shard.unwrap_or(Shard::WHOLE);
+    anyhow::ensure!(
+        shard.is_whole() || args.part_dir.is_some(),
+        "--shard {shard} writes a part: give --part-dir (merge the parts with `fastrack sim merge`)"
+    );
     let simulator = args.simulation.connect(client).await?;
     let methods: Vec<Method> =
         args.methods.iter().map(|m| Method::parse(m)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
-    let worlds: Vec<World> = (1..=args.worlds)
-        .map(|seed| world_of(None, &args.generation, seed, simulator.steb_radius()))
+    let seeds: Vec<u64> = (1..=args.worlds).filter(|&seed| shard.takes(seed as usize - 1)).collect();
+    let worlds: Vec<(u64, World)> = seeds
+        .iter()
+        .map(|&seed| Ok((seed, world_of(None, &args.generation, seed, simulator.steb_radius())?)))
         .collect::<anyhow::Result<_>>()?;
-    let bar = ProgressBar::new(args.worlds * methods.len() as u64).with_style(
+    let bar = ProgressBar::new((worlds.len() * methods.len()) as u64).with_style(
         ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} runs {msg}")?.progress_chars("=> "),
     );
-    anyhow::ensure!(args.jobs > 0, "--jobs must be at least 1");
     let started = Instant::now();
     let slots = Arc::new(Semaphore::new(args.jobs));
     let mut tasks = Vec::new();
-    for (w, world) in worlds.iter().enumerate() {
+    for (seed, world) in &worlds {
         for (m, method) in methods.iter().enumerate() {
             let (simulator, world, method, bar) = (Arc::clone(&simulator), world.clone(), method.clone(), bar.clone());
-            let slots = Arc::clone(&slots);
+            let (slots, seed) = (Arc::clone(&slots), *seed);
             tasks.push(tokio::spawn(async move {
                 let _slot = slots.acquire_owned().await?;
                 let label = method.label();
-                let done = simulator.spawn_run(world, method, w as u64 + 1).await.context("a run's thread failed")?;
-                bar.set_message(format!("world {} {label}", w + 1));
+                let done = simulator.spawn_run(world, method, seed).await.context("a run's thread failed")?;
+                bar.set_message(format!("world {seed} {label}"));
                 bar.inc(1);
-                anyhow::Ok((m, done?))
+                anyhow::Ok(BenchRun::new(seed, m, done?))
             }));
         }
     }
-    let mut runs: Vec<(usize, Run)> = Vec::with_capacity(tasks.len());
+    let mut runs = Vec::with_capacity(tasks.len());
     for task in tasks {
         runs.push(task.await.context("a run's task failed")??);
     }
     bar.finish_and_clear();
-    let by_method = |m: usize| runs.iter().filter(|(i, _)| *i == m).map(|(_, r)| r).collect::<Vec<&Run>>();
+    let config = json!({"model": args.simulation.model, "worlds": args.worlds, "methods": args.methods,
+        "control_period_s": simulator.control_period(), "substeps": args.simulation.substeps,
+        "sensor_range_m": simulator.sensor_range(), "time_limit_s": args.simulation.time_limit,
+        "disturbance_m_s": args.simulation.disturbance,
+        "world": {"size": args.generation.size, "density": args.generation.density, "size_range": args.generation.size_range}});
+    let wall_s = started.elapsed().as_secs_f64();
+    if let Some(dir) = &args.part_dir {
+        let part = BenchPart { config, shard, wall_s, runs };
+        let path = part.write(dir).with_context(|| format!("writing the part into {}", dir.display()))?;
+        print(json_mode, json!({"part": path, "shard": shard.to_string(), "runs": part.runs.len()}), || {
+            format!(
+                "shard {shard}: {} runs of {} worlds in {wall_s:.0} s; part {}",
+                part.runs.len(),
+                seeds.len(),
+                path.display()
+            )
+        });
+        return ensure_pf_safe(&methods, &part.runs);
+    }
+    let command = format!(
+        "fastrack sim bench --worlds {} --methods {} --jobs {}{}",
+        args.worlds,
+        args.methods.join(","),
+        args.jobs,
+        args.recording.record.as_ref().map_or(String::new(), |name| format!(" --record {name}"))
+    );
+    report(&config, &runs, wall_s, &command, &args.recording, json_mode)
+}
+
+/// `fastrack sim merge`: the parts of a sharded benchmark, merged into the record a single run writes.
+fn merge(args: MergeArgs, json_mode: bool) -> anyhow::Result<()> {
+    let (config, runs, wall_s) = BenchPart::merge(&args.part_dir)?;
+    let command = format!(
+        "fastrack sim merge --part-dir {}{}",
+        args.part_dir.display(),
+        args.recording.record.as_ref().map_or(String::new(), |name| format!(" --record {name}"))
+    );
+    report(&config, &runs, wall_s, &command, &args.recording, json_mode)
+}
+
+/// PF must never collide nor exceed its bound.
+fn ensure_pf_safe(methods: &[Method], runs: &[BenchRun]) -> anyhow::Result<()> {
+    let pf = methods.iter().position(|m| *m == Method::Parametric);
+    let unsafe_runs: Vec<String> = runs
+        .iter()
+        .filter(|r| Some(r.method) == pf && r.run.outcome.is_unsafe())
+        .map(|r| format!("world {}: {}", r.world, r.run.outcome.label()))
+        .collect();
+    anyhow::ensure!(unsafe_runs.is_empty(), "PF was unsafe: {}", unsafe_runs.join("; "));
+    Ok(())
+}
+
+/// The benchmark's tables, ratios, record and figures, from its configuration and runs (a single run's or
+/// merged parts').
+fn report(
+    config: &serde_json::Value,
+    runs: &[BenchRun],
+    wall_s: f64,
+    command: &str,
+    recording: &Recording,
+    json_mode: bool,
+) -> anyhow::Result<()> {
+    let names: Vec<String> =
+        serde_json::from_value(config["methods"].clone()).context("the configuration's methods")?;
+    let methods: Vec<Method> =
+        names.iter().map(|m| Method::parse(m)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
+    let by_method = |m: usize| runs.iter().filter(|r| r.method == m).map(|r| &r.run).collect::<Vec<&Run>>();
     let summaries: Vec<Summary> =
         methods.iter().enumerate().map(|(m, method)| summarise(method.label(), &by_method(m))).collect();
     let pf = methods.iter().position(|m| *m == Method::Parametric);
@@ -327,47 +422,35 @@ async fn bench(client: &FastrackClient, args: BenchArgs, json_mode: bool) -> any
         .join("\n");
     let ours = table(&summaries);
     let paper = paper_comparison(&summaries);
-    if let Some(name) = &args.recording.record {
-        let first_world: Vec<&Run> = runs.iter().take(methods.len()).map(|(_, r)| r).collect();
-        let figure = args.recording.results_dir.join(format!("{name}-world1.png"));
-        std::fs::create_dir_all(&args.recording.results_dir)?;
-        methods_on_one_world(&figure, &worlds[0], &first_world).map_err(anyhow::Error::msg)?;
-        let times_figure = args.recording.results_dir.join(format!("{name}-time-to-goal.png"));
+    if let Some(name) = &recording.record {
+        let shown: Vec<&Run> = runs.iter().filter(|r| r.world == FIGURE_WORLD).map(|r| &r.run).collect();
+        let steb = shown.first().map(|r| r.steb_radius).context("the runs hold no run of the figure's world")?;
+        let generation: Generation = serde_json::from_value(config["world"].clone()).context("the world settings")?;
+        let world = world_of(None, &generation, FIGURE_WORLD, steb)?;
+        let figure = recording.results_dir.join(format!("{name}-world{FIGURE_WORLD}.png"));
+        std::fs::create_dir_all(&recording.results_dir)?;
+        methods_on_one_world(&figure, &world, &shown).map_err(anyhow::Error::msg)?;
+        let times_figure = recording.results_dir.join(format!("{name}-time-to-goal.png"));
         let labels: Vec<&str> = methods.iter().map(Method::label).collect();
         let by_method_runs: Vec<Vec<&Run>> = (0..methods.len()).map(by_method).collect();
         time_to_goal(&times_figure, &labels, &by_method_runs).map_err(anyhow::Error::msg)?;
-        let command = format!(
-            "fastrack sim bench --worlds {} --methods {} --jobs {} --record {name}",
-            args.worlds,
-            args.methods.join(","),
-            args.jobs
-        );
         let path = write_record(
-            &args.recording.results_dir,
+            &recording.results_dir,
             name,
-            &command,
-            json!({"model": args.simulation.model, "worlds": args.worlds, "methods": args.methods, "jobs": args.jobs,
-                   "control_period_s": simulator.control_period(), "substeps": args.simulation.substeps,
-                   "sensor_range_m": simulator.sensor_range(), "time_limit_s": args.simulation.time_limit,
-                   "world": {"size": args.generation.size, "density": args.generation.density, "size_range": args.generation.size_range}}),
+            command,
+            config.clone(),
             json!({"summaries": summaries.iter().map(summary_json).collect::<Vec<_>>(),
                    "pf_time_ratios": ratios.iter().map(|(l, r)| json!({"against": l, "ratio": r.map(|x| x.0), "worlds": r.map(|x| x.1)})).collect::<Vec<_>>(),
-                   "paper_pf_over_f_ratio": 22.47 / 37.31, "wall_s": started.elapsed().as_secs_f64(), "figure": figure,
+                   "paper_pf_over_f_ratio": 22.47 / 37.31, "wall_s": wall_s, "figure": figure,
                    "time_to_goal_figure": times_figure}),
             &[("Ours", &ours), ("The paper's Table 1 beside ours", &paper)],
         )?;
         eprintln!("record: {}", path.display());
     }
-    let failures: Vec<String> = summaries
-        .iter()
-        .filter(|s| s.method == "PF" && (s.collided > 0 || s.bound_exceeded > 0))
-        .map(|s| format!("PF: {} collisions, {} bounds exceeded in {} runs", s.collided, s.bound_exceeded, s.runs))
-        .collect();
     print(json_mode, json!({"summaries": summaries.iter().map(summary_json).collect::<Vec<_>>()}), || {
         format!("{}\n{}\n{ratio_text}", ours.to_markdown(), paper.to_markdown())
     });
-    anyhow::ensure!(failures.is_empty(), "{}", failures.join("; "));
-    Ok(())
+    ensure_pf_safe(&methods, runs)
 }
 
 async fn fleet(client: &FastrackClient, args: FleetArgs, json_mode: bool) -> anyhow::Result<()> {

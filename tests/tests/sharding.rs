@@ -1,0 +1,76 @@
+//! Batch work split into shards (`--shard INDEX/COUNT`, as the pods of a Kubernetes Indexed Job run it) and
+//! merged gives exactly what a single process gives: the navigation benchmark against the real server, and
+//! the scenario verification of a bundle's TEB table.
+
+use fastrack_e2e::{run_binary, TestServer};
+use serde_json::Value;
+use std::path::Path;
+use std::process::Command;
+
+/// A record's JSON.
+fn record(dir: &Path, name: &str) -> Value {
+    serde_json::from_slice(&std::fs::read(dir.join(format!("{name}.json"))).unwrap()).unwrap()
+}
+
+/// The figures of a benchmark record that its seeds decide: everything but wall and decision times.
+fn seeded_figures(record: &Value) -> Value {
+    let mut summaries = record["figures"]["summaries"].clone();
+    for summary in summaries.as_array_mut().unwrap() {
+        let summary = summary.as_object_mut().unwrap();
+        summary.remove("decision_p50_ms");
+        summary.remove("decision_p99_ms");
+    }
+    serde_json::json!({"summaries": summaries, "ratios": record["figures"]["pf_time_ratios"], "config": record["config"]})
+}
+
+#[test]
+fn a_benchmark_in_shards_merges_into_the_single_run() {
+    let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
+    let server = TestServer::start(&models, &[]);
+    let out = tempfile::tempdir().unwrap();
+    let (results, parts) = (out.path().join("results"), out.path().join("parts"));
+    let common = |extra: &[&str]| {
+        let mut args = vec!["--server", server.endpoint.as_str(), "sim"];
+        args.extend_from_slice(extra);
+        args.iter().map(|s| s.to_string()).collect::<Vec<String>>()
+    };
+    let run = |args: Vec<String>| run_binary("fastrack", &args.iter().map(String::as_str).collect::<Vec<_>>());
+    run(vec!["--server".into(), server.endpoint.clone(), "health".into(), "--wait-s".into(), "60".into()]);
+    let bench = ["bench", "--worlds", "3", "--methods", "pf,f-low,mppi", "--results-dir"];
+    let results_dir = results.to_str().unwrap();
+    let mut whole = bench.to_vec();
+    whole.extend([results_dir, "--record", "whole"]);
+    run(common(&whole));
+    let part_dir = parts.to_str().unwrap();
+    for shard in ["0/2", "1/2"] {
+        let mut part = bench.to_vec();
+        part.extend([results_dir, "--shard", shard, "--part-dir", part_dir]);
+        let said = run(common(&part));
+        assert!(said.contains(&format!("shard {shard}:")), "{said}");
+    }
+    run(common(&["merge", "--part-dir", part_dir, "--results-dir", results_dir, "--record", "merged"]));
+    let (single, merged) = (record(&results, "whole"), record(&results, "merged"));
+    assert_eq!(seeded_figures(&single), seeded_figures(&merged));
+    assert_eq!(single["figures"]["summaries"][0]["runs"], 3, "{single}");
+    assert!(results.join("merged-world1.png").is_file() && results.join("merged-time-to-goal.png").is_file());
+
+    // A part missing, or a part of another benchmark, is refused with the reason.
+    std::fs::remove_file(parts.join("sim-bench-part-1-of-2.json")).unwrap();
+    let fastrack = fastrack_e2e::binary("fastrack");
+    let merge = |dir: &str| Command::new(&fastrack).args(["sim", "merge", "--part-dir", dir]).output().unwrap();
+    let missing = merge(part_dir);
+    let said = String::from_utf8_lossy(&missing.stderr);
+    assert!(!missing.status.success() && said.contains("shards 1 of 2 are missing"), "{said}");
+    let mut other = bench.to_vec();
+    other[2] = "2";
+    other.extend([results_dir, "--shard", "1/2", "--part-dir", part_dir]);
+    run(common(&other));
+    let mixed = merge(part_dir);
+    let said = String::from_utf8_lossy(&mixed.stderr);
+    assert!(!mixed.status.success() && said.contains("shard 1/2 ran"), "{said}");
+    // A shard without a folder for its part is refused before any run.
+    let mut lost = bench.to_vec();
+    lost.extend([results_dir, "--shard", "0/2"]);
+    let refused = Command::new(&fastrack).args(common(&lost)).output().unwrap();
+    assert!(String::from_utf8_lossy(&refused.stderr).contains("give --part-dir"));
+}
