@@ -15,6 +15,7 @@
 
 use fastrack_valuefn::manifest::{Manifest, TebRow, Verification};
 use fastrack_valuefn::runtime::{Evaluator, RuntimeError};
+use fastrack_valuefn::shard::Shard;
 use fastrack_valuefn::simulation::{step_relative, HeldInputs, Planner};
 use fastrack_valuefn::system::AffineSystem;
 use fastrack_valuefn::teb::{reshape_at_served_levels, TebOptions};
@@ -290,15 +291,34 @@ pub fn verify_table(
     options: &VerifyOptions,
     progress: &ProgressBar,
 ) -> Result<Vec<RowReport>, VerifyError> {
+    let reports = verify_rows(evaluator, manifest, system, betas, Shard::WHOLE, options, progress)?;
+    apply_reports(evaluator, manifest, system, &reports)?;
+    Ok(reports)
+}
+
+/// Verifies this shard's share of the rows of `manifest` whose `beta` is in `betas` (all rows when `None`),
+/// without changing the manifest: the `i`-th selected row belongs to shard `i % count`. Each row's samples
+/// are seeded by the options' seed and the row's `beta` alone, so shards give the reports a single run gives.
+pub fn verify_rows(
+    evaluator: &Evaluator,
+    manifest: &Manifest,
+    system: &AffineSystem,
+    betas: Option<&[f64]>,
+    shard: Shard,
+    options: &VerifyOptions,
+    progress: &ProgressBar,
+) -> Result<Vec<RowReport>, VerifyError> {
     let selected: Vec<usize> = (0..manifest.teb_table.len())
         .filter(|&i| betas.is_none_or(|b| b.iter().any(|&x| (x - manifest.teb_table[i].beta).abs() < 1e-9)))
         .collect();
     if selected.is_empty() {
         return Err(VerifyError::Setting(format!("no TEB row has a beta in {betas:?}")));
     }
-    progress.set_length(selected.len() as u64);
-    let mut reports = Vec::with_capacity(selected.len());
-    for i in selected {
+    let mine: Vec<usize> =
+        selected.iter().enumerate().filter(|(position, _)| shard.takes(*position)).map(|(_, &i)| i).collect();
+    progress.set_length(mine.len() as u64);
+    let mut reports = Vec::with_capacity(mine.len());
+    for i in mine {
         let report = verify_row(evaluator, manifest, system, &manifest.teb_table[i], options)?;
         tracing::info!(
             beta = report.beta,
@@ -307,14 +327,30 @@ pub fn verify_table(
             violations = report.verification.violations,
             "row verified"
         );
-        manifest.teb_table[i].verification = Some(report.verification.clone());
         reports.push(report);
         progress.inc(1);
     }
+    Ok(reports)
+}
+
+/// Writes `reports` into their rows of `manifest` (matched by `beta`), keeps the served levels monotone in
+/// `beta`, and reshapes every row's extent and boundary radii at its served level.
+pub fn apply_reports(
+    evaluator: &Evaluator,
+    manifest: &mut Manifest,
+    system: &AffineSystem,
+    reports: &[RowReport],
+) -> Result<(), VerifyError> {
+    for report in reports {
+        let row =
+            manifest.teb_table.iter_mut().find(|row| row.beta == report.beta).ok_or_else(|| {
+                VerifyError::Setting(format!("the table has no row with beta {} to verify", report.beta))
+            })?;
+        row.verification = Some(report.verification.clone());
+    }
     monotone_envelope(manifest)?;
     reshape_at_served_levels(evaluator, system, &mut manifest.teb_table, &TebOptions::default())
-        .map_err(VerifyError::Shape)?;
-    Ok(reports)
+        .map_err(VerifyError::Shape)
 }
 
 /// Keeps served levels monotone in `beta` (the manifest's invariant): a verified row serves at least what

@@ -5,17 +5,13 @@
 
 use crate::episode::{Outcome, Run};
 use fastrack_valuefn::record::Table;
-use fastrack_valuefn::shard::Shard;
+use fastrack_valuefn::shard::Part;
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
-use std::path::{Path, PathBuf};
 use std::time::Duration;
 
 /// The world whose runs the benchmark's figure shows; the others keep no samples.
 pub const FIGURE_WORLD: u64 = 1;
-
-/// File-name stem of the benchmark's parts.
-const PART_STEM: &str = "sim-bench";
 
 /// One run of a benchmark.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
@@ -38,83 +34,11 @@ impl BenchRun {
     }
 }
 
-/// What one shard of a benchmark ran: its configuration (the same for every shard of a split) and runs.
-#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct BenchPart {
-    /// Everything that decides the runs: model, worlds, methods, simulation settings.
-    pub config: Value,
-    /// Which shard.
-    pub shard: Shard,
-    /// Wall time of the shard (s).
-    pub wall_s: f64,
-    /// Its runs.
-    pub runs: Vec<BenchRun>,
-}
+/// File-name stem of the benchmark's parts (`sim-bench-part-<index>-of-<count>.json`).
+pub const PART_STEM: &str = "sim-bench";
 
-/// Parts that cannot be merged.
-#[derive(Debug, thiserror::Error)]
-pub enum MergeError {
-    /// A part could not be read.
-    #[error("{path}: {why}")]
-    Read {
-        /// The file.
-        path: PathBuf,
-        /// Why.
-        why: String,
-    },
-    /// The parts do not form one split of one benchmark.
-    #[error("the parts in {dir} do not make one benchmark: {why}")]
-    Mismatch {
-        /// The folder.
-        dir: PathBuf,
-        /// Why.
-        why: String,
-    },
-}
-
-impl BenchPart {
-    /// Writes the part into `dir` as `sim-bench-part-<index>-of-<count>.json`.
-    pub fn write(&self, dir: &Path) -> std::io::Result<PathBuf> {
-        std::fs::create_dir_all(dir)?;
-        let path = dir.join(self.shard.part_file_name(PART_STEM));
-        std::fs::write(&path, serde_json::to_vec(self)?)?;
-        Ok(path)
-    }
-
-    /// Reads every part in `dir` and merges them: one configuration, every shard once; returns the
-    /// configuration, the runs ordered by world and method, and the longest shard's wall time.
-    pub fn merge(dir: &Path) -> Result<(Value, Vec<BenchRun>, f64), MergeError> {
-        let mismatch = |why: String| MergeError::Mismatch { dir: dir.to_path_buf(), why };
-        let read_error = |path: &Path, why: String| MergeError::Read { path: path.to_path_buf(), why };
-        let entries = std::fs::read_dir(dir).map_err(|e| read_error(dir, e.to_string()))?;
-        let mut paths: Vec<PathBuf> = entries
-            .filter_map(|e| e.ok().map(|e| e.path()))
-            .filter(|p| {
-                p.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.starts_with(PART_STEM) && n.ends_with(".json"))
-            })
-            .collect();
-        paths.sort();
-        let mut parts = Vec::with_capacity(paths.len());
-        for path in &paths {
-            let bytes = std::fs::read(path).map_err(|e| read_error(path, e.to_string()))?;
-            let part: BenchPart = serde_json::from_slice(&bytes).map_err(|e| read_error(path, e.to_string()))?;
-            parts.push(part);
-        }
-        let shards: Vec<Shard> = parts.iter().map(|p| p.shard).collect();
-        Shard::check_complete(&shards).map_err(&mismatch)?;
-        let config = parts[0].config.clone();
-        if let Some(other) = parts.iter().find(|p| p.config != config) {
-            return Err(mismatch(format!(
-                "shard {} ran {} where shard {} ran {}",
-                other.shard, other.config, parts[0].shard, config
-            )));
-        }
-        let wall_s = parts.iter().map(|p| p.wall_s).fold(0.0, f64::max);
-        let mut runs: Vec<BenchRun> = parts.into_iter().flat_map(|p| p.runs).collect();
-        runs.sort_by_key(|r| (r.world, r.method));
-        Ok((config, runs, wall_s))
-    }
-}
+/// What one shard of a benchmark ran.
+pub type BenchPart = Part<BenchRun>;
 
 /// The paper's Table 1 (20 runs): reached %, collision %, solution time (s), by method label.
 pub const PAPER_TABLE: [(&str, f64, f64, f64); 4] = [

@@ -74,3 +74,48 @@ fn a_benchmark_in_shards_merges_into_the_single_run() {
     let refused = Command::new(&fastrack).args(common(&lost)).output().unwrap();
     assert!(String::from_utf8_lossy(&refused.stderr).contains("give --part-dir"));
 }
+
+#[test]
+fn a_verification_in_shards_merges_into_the_single_run() {
+    let bundle = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/dubins4d/3");
+    let out = tempfile::tempdir().unwrap();
+    let at = |name: &str| out.path().join(name).to_str().unwrap().to_string();
+    let (results, parts) = (at("results"), at("parts"));
+    // Few samples over a short horizon: the same work either way, in seconds.
+    let verify = |extra: &[&str]| {
+        let mut args = vec!["verify", "--bundle", bundle.to_str().unwrap(), "--eps", "0.5", "--delta", "0.5"];
+        args.extend(["--horizon", "0.5", "--step", "0.05", "--results-dir", &results]);
+        args.extend_from_slice(extra);
+        run_binary("fastrack-grid", &args)
+    };
+    verify(&["--out", &at("whole"), "--record", "whole"]);
+    for shard in ["0/3", "1/3", "2/3"] {
+        let said = verify(&["--out", &at("unused"), "--shard", shard, "--part-dir", &parts]);
+        assert!(said.contains(&format!("shard {shard}:")), "{said}");
+    }
+    assert!(!out.path().join("unused").exists(), "a shard writes no bundle");
+    run_binary(
+        "fastrack-grid",
+        &["verify-merge", "--bundle", bundle.to_str().unwrap(), "--out", &at("merged"), "--part-dir", &parts]
+            .into_iter()
+            .chain(["--results-dir", &results, "--record", "merged"])
+            .collect::<Vec<_>>(),
+    );
+    let manifest = |root: &str| -> Value {
+        let text = std::fs::read(out.path().join(root).join("dubins4d/3/manifest.json")).unwrap();
+        serde_json::from_slice::<Value>(&text).unwrap()["teb_table"].clone()
+    };
+    assert_eq!(manifest("whole"), manifest("merged"));
+    assert!(manifest("whole")[0]["verification"]["samples"].as_u64() == Some(7), "{}", manifest("whole")[0]);
+    let (single, merged) = (record(Path::new(&results), "whole"), record(Path::new(&results), "merged"));
+    assert_eq!((&single["figures"], &single["config"]), (&merged["figures"], &merged["config"]));
+
+    // Parts of another bundle's graph are refused.
+    let other = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/untrained-dubins4d/1");
+    let refused = Command::new(fastrack_e2e::binary("fastrack-grid"))
+        .args(["verify-merge", "--bundle", other.to_str().unwrap(), "--out", &at("other"), "--part-dir", &parts])
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success() && said.contains("the parts verified the graph"), "{said}");
+}

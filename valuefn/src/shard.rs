@@ -3,8 +3,11 @@
 //! combines their parts into what a single run gives. `--shard COUNT` alone takes the index from
 //! `JOB_COMPLETION_INDEX`, which Kubernetes sets in each pod of an Indexed Job.
 
+use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
+use serde_json::Value;
 use std::fmt;
+use std::path::{Path, PathBuf};
 use std::str::FromStr;
 
 /// The environment variable Kubernetes sets to a pod's index in an Indexed Job.
@@ -90,6 +93,91 @@ impl Shard {
     }
 }
 
+/// What one shard produced: the configuration that decides the work (the same for every shard of one
+/// split), which shard, its wall time, and its items.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct Part<T> {
+    /// Everything that decides the items.
+    pub config: Value,
+    /// Which shard.
+    pub shard: Shard,
+    /// Wall time of the shard (s).
+    pub wall_s: f64,
+    /// Its items.
+    pub items: Vec<T>,
+}
+
+/// The parts of one split, merged.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Merged<T> {
+    /// The configuration every part shares.
+    pub config: Value,
+    /// Every part's items, in shard order.
+    pub items: Vec<T>,
+    /// The longest shard's wall time (s): the split's wall time when the shards ran at once.
+    pub wall_s: f64,
+}
+
+/// Parts that cannot be merged.
+#[derive(Debug, thiserror::Error)]
+pub enum PartError {
+    /// A part could not be read.
+    #[error("{path}: {why}")]
+    Read {
+        /// The file.
+        path: PathBuf,
+        /// Why.
+        why: String,
+    },
+    /// The parts do not form one split of one piece of work.
+    #[error("the parts in {dir} do not make one run: {why}")]
+    Mismatch {
+        /// The folder.
+        dir: PathBuf,
+        /// Why.
+        why: String,
+    },
+}
+
+impl<T: Serialize + DeserializeOwned> Part<T> {
+    /// Writes the part into `dir` as `<stem>-part-<index>-of-<count>.json`.
+    pub fn write(&self, dir: &Path, stem: &str) -> std::io::Result<PathBuf> {
+        std::fs::create_dir_all(dir)?;
+        let path = dir.join(self.shard.part_file_name(stem));
+        std::fs::write(&path, serde_json::to_vec(self)?)?;
+        Ok(path)
+    }
+
+    /// Reads every `<stem>-part-*.json` in `dir` and merges them: one configuration, every shard once.
+    pub fn merge(dir: &Path, stem: &str) -> Result<Merged<T>, PartError> {
+        let mismatch = |why: String| PartError::Mismatch { dir: dir.to_path_buf(), why };
+        let read_error = |path: &Path, why: String| PartError::Read { path: path.to_path_buf(), why };
+        let prefix = format!("{stem}-part-");
+        let entries = std::fs::read_dir(dir).map_err(|e| read_error(dir, e.to_string()))?;
+        let mut paths: Vec<PathBuf> = entries
+            .filter_map(|e| e.ok().map(|e| e.path()))
+            .filter(|p| {
+                p.file_name().and_then(|n| n.to_str()).is_some_and(|n| n.starts_with(&prefix) && n.ends_with(".json"))
+            })
+            .collect();
+        paths.sort();
+        let mut parts: Vec<Part<T>> = Vec::with_capacity(paths.len());
+        for path in &paths {
+            let bytes = std::fs::read(path).map_err(|e| read_error(path, e.to_string()))?;
+            parts.push(serde_json::from_slice(&bytes).map_err(|e| read_error(path, e.to_string()))?);
+        }
+        let shards: Vec<Shard> = parts.iter().map(|p| p.shard).collect();
+        Shard::check_complete(&shards).map_err(&mismatch)?;
+        parts.sort_by_key(|p| p.shard.index);
+        let config = parts[0].config.clone();
+        if let Some(other) = parts.iter().find(|p| p.config != config) {
+            return Err(mismatch(format!("shard {} ran {} where shard 0 ran {config}", other.shard, other.config)));
+        }
+        let wall_s = parts.iter().map(|p| p.wall_s).fold(0.0, f64::max);
+        Ok(Merged { config, items: parts.into_iter().flat_map(|p| p.items).collect(), wall_s })
+    }
+}
+
 impl fmt::Display for Shard {
     fn fmt(&self, f: &mut fmt::Formatter<'_>) -> fmt::Result {
         write!(f, "{}/{}", self.index, self.count)
@@ -141,5 +229,31 @@ mod tests {
         let mixed = [Shard { index: 0, count: 2 }, shards[1]];
         assert!(Shard::check_complete(&mixed).unwrap_err().contains("mixed"));
         assert_eq!(shards[1].part_file_name("sim-bench"), "sim-bench-part-1-of-3.json");
+    }
+
+    #[test]
+    fn parts_merge_in_shard_order_and_only_when_they_make_one_split() {
+        let dir = tempfile::tempdir().unwrap();
+        let config = serde_json::json!({"worlds": 5});
+        for index in [1, 0] {
+            let items: Vec<usize> = (0..5).filter(|&i| Shard { index, count: 2 }.takes(i)).collect();
+            let part =
+                Part { config: config.clone(), shard: Shard { index, count: 2 }, wall_s: 1.0 + index as f64, items };
+            part.write(dir.path(), "work").unwrap();
+        }
+        let merged = Part::<usize>::merge(dir.path(), "work").unwrap();
+        assert_eq!((merged.config, merged.items, merged.wall_s), (config, vec![0, 2, 4, 1, 3], 2.0));
+        let other = Part {
+            config: serde_json::json!({"worlds": 6}),
+            shard: Shard { index: 1, count: 2 },
+            wall_s: 0.0,
+            items: vec![1usize],
+        };
+        other.write(dir.path(), "work").unwrap();
+        let e = Part::<usize>::merge(dir.path(), "work").unwrap_err().to_string();
+        assert!(e.contains("shard 1/2 ran {\"worlds\":6} where shard 0 ran {\"worlds\":5}"), "{e}");
+        std::fs::write(dir.path().join("work-part-1-of-2.json"), "{").unwrap();
+        assert!(matches!(Part::<usize>::merge(dir.path(), "work"), Err(PartError::Read { .. })));
+        assert!(Part::<usize>::merge(dir.path(), "other").unwrap_err().to_string().contains("no parts"));
     }
 }

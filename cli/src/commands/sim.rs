@@ -8,7 +8,7 @@ use fastrack_cli::load_generator::LatencySummary;
 use fastrack_client::{model_ref, FastrackClient};
 use fastrack_proto::planner_speed::SpeedRow;
 use fastrack_sim::bench::{
-    paper_comparison, summarise, summary_json, table, time_ratio, BenchPart, BenchRun, Summary, FIGURE_WORLD,
+    paper_comparison, summarise, summary_json, table, time_ratio, BenchPart, BenchRun, Summary, FIGURE_WORLD, PART_STEM,
 };
 use fastrack_sim::episode::{Outcome, Run, RunSettings, Simulator};
 use fastrack_sim::methods::Method;
@@ -340,17 +340,17 @@ async fn bench(client: &FastrackClient, args: BenchArgs, json_mode: bool) -> any
         "world": {"size": args.generation.size, "density": args.generation.density, "size_range": args.generation.size_range}});
     let wall_s = started.elapsed().as_secs_f64();
     if let Some(dir) = &args.part_dir {
-        let part = BenchPart { config, shard, wall_s, runs };
-        let path = part.write(dir).with_context(|| format!("writing the part into {}", dir.display()))?;
-        print(json_mode, json!({"part": path, "shard": shard.to_string(), "runs": part.runs.len()}), || {
+        let part = BenchPart { config, shard, wall_s, items: runs };
+        let path = part.write(dir, PART_STEM).with_context(|| format!("writing the part into {}", dir.display()))?;
+        print(json_mode, json!({"part": path, "shard": shard.to_string(), "runs": part.items.len()}), || {
             format!(
                 "shard {shard}: {} runs of {} worlds in {wall_s:.0} s; part {}",
-                part.runs.len(),
+                part.items.len(),
                 seeds.len(),
                 path.display()
             )
         });
-        return ensure_pf_safe(&methods, &part.runs);
+        return ensure_pf_safe(&methods, &part.items);
     }
     let command = format!(
         "fastrack sim bench --worlds {} --methods {} --jobs {}{}",
@@ -364,13 +364,15 @@ async fn bench(client: &FastrackClient, args: BenchArgs, json_mode: bool) -> any
 
 /// `fastrack sim merge`: the parts of a sharded benchmark, merged into the record a single run writes.
 fn merge(args: MergeArgs, json_mode: bool) -> anyhow::Result<()> {
-    let (config, runs, wall_s) = BenchPart::merge(&args.part_dir)?;
+    let merged = BenchPart::merge(&args.part_dir, PART_STEM)?;
+    let mut runs = merged.items;
+    runs.sort_by_key(|r| (r.world, r.method));
     let command = format!(
         "fastrack sim merge --part-dir {}{}",
         args.part_dir.display(),
         args.recording.record.as_ref().map_or(String::new(), |name| format!(" --record {name}"))
     );
-    report(&config, &runs, wall_s, &command, &args.recording, json_mode)
+    report(&merged.config, &runs, merged.wall_s, &command, &args.recording, json_mode)
 }
 
 /// PF must never collide nor exceed its bound.

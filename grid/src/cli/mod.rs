@@ -39,6 +39,8 @@ enum Command {
     /// Scenario verification of a bundle's TEB table (rollouts of the served control from its sublevel sets);
     /// writes verified levels into a copy of the bundle.
     Verify(verify::Args),
+    /// Merges the parts of a sharded `verify` into the verified bundle and the record a single run writes.
+    VerifyMerge(verify::MergeArgs),
     /// What adversarial planners sustain against grid solutions' own tracker policies (an independent check of
     /// their V_min by simulation), with a plot against beta and a record.
     Rollout(rollout::Args),
@@ -54,6 +56,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Horizon(args) => horizon::run(args),
         Command::Compare(args) => compare::run(args),
         Command::Verify(args) => verify::run(args),
+        Command::VerifyMerge(args) => verify::merge(args),
         Command::Rollout(args) => rollout::run(args),
         Command::Bench(args) => bench::run(args),
     }

@@ -1,15 +1,22 @@
-//! `verify`: scenario verification of a bundle's TEB table, written back into a copy of the bundle.
+//! `verify`: scenario verification of a bundle's TEB table, written back into a copy of the bundle; with
+//! `--shard`, one shard's rows written as a part, which `verify-merge` combines into what a single run writes.
 
 use super::common::command_line;
 use anyhow::Context;
-use fastrack_grid::verify::{required_samples, verify_table, VerifyOptions};
+use fastrack_grid::verify::{apply_reports, required_samples, verify_rows, RowReport, VerifyOptions};
 use fastrack_valuefn::bundle::Bundle;
+use fastrack_valuefn::manifest::Manifest;
 use fastrack_valuefn::record::{write_record, Table};
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
-use fastrack_valuefn::system::for_bundle;
+use fastrack_valuefn::shard::{Part, Shard};
+use fastrack_valuefn::system::{for_bundle, AffineSystem};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
+use std::time::Instant;
+
+/// File-name stem of verification parts (`grid-verify-part-<index>-of-<count>.json`).
+const PART_STEM: &str = "grid-verify";
 
 /// Arguments of `verify`.
 #[derive(clap::Args)]
@@ -61,17 +68,64 @@ pub struct Args {
     /// Folder of measurement records.
     #[arg(long, default_value = "bench/results")]
     results_dir: PathBuf,
+    /// Only this shard of the rows, `INDEX/COUNT` (the `i`-th row verified goes to shard `i % COUNT`), or
+    /// `COUNT` with the index from `JOB_COMPLETION_INDEX` (a Kubernetes Indexed Job); writes a part
+    /// (--part-dir) for `verify-merge` instead of a bundle and a record.
+    #[arg(long)]
+    shard: Option<Shard>,
+    /// Folder the shard's part is written into, as `grid-verify-part-<index>-of-<count>.json`.
+    #[arg(long)]
+    part_dir: Option<PathBuf>,
+}
+
+/// Arguments of `verify-merge`.
+#[derive(clap::Args)]
+pub struct MergeArgs {
+    /// The bundle's version folder the shards verified, e.g. `models/dubins4d/3`.
+    #[arg(long)]
+    bundle: PathBuf,
+    /// Repository root the verified bundle is written into (`<out>/<name>/<version>/`).
+    #[arg(long)]
+    out: PathBuf,
+    /// Folder holding every shard's part.
+    #[arg(long)]
+    part_dir: PathBuf,
+    /// ONNX Runtime library (default: FASTRACK_ORT_LIB, then .cache/onnxruntime).
+    #[arg(long)]
+    ort_lib: Option<PathBuf>,
+    /// Record name (default `grid-verify-<model>`).
+    #[arg(long)]
+    record: Option<String>,
+    /// Folder of measurement records.
+    #[arg(long, default_value = "bench/results")]
+    results_dir: PathBuf,
+}
+
+/// A bundle with what verifying it needs.
+struct Loaded {
+    bundle: Bundle,
+    system: AffineSystem,
+    evaluator: Evaluator,
+}
+
+fn load(path: &Path, ort_lib: Option<&Path>) -> anyhow::Result<Loaded> {
+    let bundle = Bundle::load(path)?;
+    let manifest = &bundle.manifest;
+    let system = for_bundle(&manifest.system.id, manifest.n_params()).with_context(|| {
+        format!("the bundle's system `{}` with {} parameters is unknown", manifest.system.id, manifest.n_params())
+    })?;
+    let evaluator = Evaluator::new(runtime(ort_lib)?, &bundle.onnx, GraphDims::of(manifest), 1)?;
+    Ok(Loaded { bundle, system, evaluator })
 }
 
 /// Runs `verify`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let bundle = Bundle::load(&args.bundle)?;
-    let mut manifest = bundle.manifest.clone();
-    let system = for_bundle(&manifest.system.id, manifest.n_params()).with_context(|| {
-        format!("the bundle's system `{}` with {} parameters is unknown", manifest.system.id, manifest.n_params())
-    })?;
-    let dims = GraphDims::of(&manifest);
-    let evaluator = Evaluator::new(runtime(args.ort_lib.as_deref())?, &bundle.onnx, dims, 1)?;
+    let shard = args.shard.unwrap_or(Shard::WHOLE);
+    anyhow::ensure!(
+        shard.is_whole() || args.part_dir.is_some(),
+        "--shard {shard} writes a part: give --part-dir (merge the parts with `fastrack-grid verify-merge`)"
+    );
+    let Loaded { bundle, system, evaluator } = load(&args.bundle, args.ort_lib.as_deref())?;
     let options = VerifyOptions {
         eps: args.eps,
         level_margin: args.level_margin,
@@ -95,8 +149,58 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             .unwrap_or_else(|_| ProgressStyle::default_bar()),
     );
     let betas = (!args.betas.is_empty()).then_some(&args.betas[..]);
-    let reports = verify_table(&evaluator, &mut manifest, &system, betas, &options, &bar)?;
+    let started = Instant::now();
+    let reports = verify_rows(&evaluator, &bundle.manifest, &system, betas, shard, &options, &bar)?;
     bar.finish_and_clear();
+    let config = json!({ "bundle": args.bundle, "model": bundle.manifest.name, "version": bundle.manifest.version,
+        "onnx_sha256": bundle.manifest.onnx_sha256, "untrained": bundle.manifest.untrained, "options": options,
+        "betas": args.betas });
+    if let Some(dir) = &args.part_dir {
+        let part = Part { config, shard, wall_s: started.elapsed().as_secs_f64(), items: reports };
+        let path = part.write(dir, PART_STEM).with_context(|| format!("writing the part into {}", dir.display()))?;
+        println!("shard {shard}: {} rows verified; part {}", part.items.len(), path.display());
+        return Ok(());
+    }
+    let out = Outputs { out: &args.out, record: args.record.as_deref(), results_dir: &args.results_dir };
+    finish(&evaluator, bundle, &system, reports, config, &out)
+}
+
+/// Runs `verify-merge`: the shards' parts into the verified bundle and the record a single run writes.
+pub fn merge(args: MergeArgs) -> anyhow::Result<()> {
+    let Loaded { bundle, system, evaluator } = load(&args.bundle, args.ort_lib.as_deref())?;
+    let merged = Part::<RowReport>::merge(&args.part_dir, PART_STEM)?;
+    let (verified, loaded) = (merged.config["onnx_sha256"].as_str(), &bundle.manifest.onnx_sha256);
+    anyhow::ensure!(
+        verified == Some(loaded.as_str()),
+        "the parts verified the graph {} but {} holds {loaded}",
+        verified.unwrap_or("(none)"),
+        args.bundle.display()
+    );
+    let mut reports = merged.items;
+    let position = |beta: f64| bundle.manifest.teb_table.iter().position(|row| row.beta == beta);
+    reports.sort_by_key(|r| position(r.beta));
+    let out = Outputs { out: &args.out, record: args.record.as_deref(), results_dir: &args.results_dir };
+    finish(&evaluator, bundle, &system, reports, merged.config, &out)
+}
+
+/// Where a verification's results go.
+struct Outputs<'a> {
+    out: &'a Path,
+    record: Option<&'a str>,
+    results_dir: &'a Path,
+}
+
+/// Writes `reports` into the bundle's table, prints and records them, and writes the verified bundle.
+fn finish(
+    evaluator: &Evaluator,
+    bundle: Bundle,
+    system: &AffineSystem,
+    reports: Vec<RowReport>,
+    config: serde_json::Value,
+    outputs: &Outputs<'_>,
+) -> anyhow::Result<()> {
+    let mut manifest: Manifest = bundle.manifest.clone();
+    apply_reports(evaluator, &mut manifest, system, &reports)?;
     let mut table = Table::new(&[
         "beta",
         "learned level",
@@ -130,11 +234,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let broken = reports.iter().filter(|r| r.verification.violations > 0).count();
     println!("{broken} of {} rows had violations", reports.len());
-    let name = args.record.clone().unwrap_or_else(|| format!("grid-verify-{}", manifest.name));
-    let config = json!({ "bundle": args.bundle, "out": args.out, "model": manifest.name, "version": manifest.version,
-        "untrained": manifest.untrained, "options": options });
+    let name = outputs.record.map_or_else(|| format!("grid-verify-{}", manifest.name), str::to_string);
     let path = write_record(
-        &args.results_dir,
+        outputs.results_dir,
         &name,
         &command_line(),
         config,
@@ -142,7 +244,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         &[("verification", &table)],
     )?;
     println!("wrote {}", path.display());
-    let dir = Bundle::write(&args.out, manifest, &bundle.onnx)?;
+    let dir = Bundle::write(outputs.out, manifest, &bundle.onnx)?;
     println!("wrote the verified bundle {}", dir.display());
     Ok(())
 }
