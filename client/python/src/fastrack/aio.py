@@ -1,0 +1,233 @@
+"""The asyncio client, :class:`AsyncClient` (on ``grpc.aio``): the same calls as :class:`fastrack.Client`,
+awaited. Create it inside the event loop that uses it."""
+
+from __future__ import annotations
+
+import asyncio
+import time
+from types import TracebackType
+from typing import TypeVar
+
+import grpc
+import grpc.aio
+import numpy.typing as npt
+from google.protobuf.message import Message
+from grpc_health.v1 import health_pb2
+
+from . import convert, results
+from .channel import DEFAULT_TIMEOUT_S, NO_RETRY, Retry, Settings, Tls
+from .client import HEALTH_CHECK
+from .errors import Unavailable, from_rpc_error
+from .track import AsyncTrackStream
+from .v1 import models_pb2, models_pb2_grpc, safety_pb2, safety_pb2_grpc
+
+Request = TypeVar("Request", bound=Message)
+Response = TypeVar("Response", bound=Message)
+
+
+class AsyncClient:
+    """An asyncio connection to one fastrack server; arguments and methods as :class:`fastrack.Client`.
+
+    Use as ``async with AsyncClient("127.0.0.1:50051") as client``; many coroutines may share it (e.g. one
+    ``async with client.track(...)`` per robot).
+    """
+
+    def __init__(
+        self,
+        address: str = "127.0.0.1:50051",
+        *,
+        timeout: float = DEFAULT_TIMEOUT_S,
+        token: str | None = None,
+        tls: Tls | None = None,
+        retry: Retry = Retry(),
+        max_reconnect_backoff: float = 1.0,
+    ) -> None:
+        self.settings = Settings(address, timeout, token, tls, retry, max_reconnect_backoff)
+        self.channel: grpc.aio.Channel = self.settings.aio_channel()
+        self._models = models_pb2_grpc.ModelServiceStub(self.channel)
+        self._admin = models_pb2_grpc.ModelAdminServiceStub(self.channel)
+        self._safety = safety_pb2_grpc.SafetyServiceStub(self.channel)
+        self._health: grpc.aio.UnaryUnaryMultiCallable[health_pb2.HealthCheckRequest, health_pb2.HealthCheckResponse]
+        self._health = self.channel.unary_unary(
+            HEALTH_CHECK,
+            request_serializer=health_pb2.HealthCheckRequest.SerializeToString,
+            response_deserializer=health_pb2.HealthCheckResponse.FromString,
+        )
+        self._dims: dict[tuple[str, int], convert.Dims] = {}
+
+    async def _unary(
+        self,
+        rpc: grpc.aio.UnaryUnaryMultiCallable[Request, Response],
+        request: Request,
+        timeout: float | None,
+        retry: bool = True,
+    ) -> Response:
+        """One unary call with the token and deadline, retried on UNAVAILABLE if ``retry``."""
+        policy = self.settings.retry if retry else NO_RETRY
+        deadline = self.settings.timeout if timeout is None else timeout
+        for attempt in range(policy.attempts):
+            try:
+                return await rpc(request, timeout=deadline, metadata=self.settings.metadata)
+            except grpc.RpcError as e:
+                error = from_rpc_error(e)
+            if not isinstance(error, Unavailable) or attempt + 1 == policy.attempts:
+                raise error
+            await asyncio.sleep(policy.delay(attempt))
+        raise AssertionError("unreachable: Retry.attempts >= 1")
+
+    async def health(self, service: str = "", *, timeout: float | None = None) -> str:
+        """The server's health (``grpc.health.v1``): ``"SERVING"``, ``"NOT_SERVING"``, ..."""
+        request = health_pb2.HealthCheckRequest(service=service)
+        reply = await self._unary(self._health, request, timeout, retry=False)
+        return health_pb2.HealthCheckResponse.ServingStatus.Name(reply.status)
+
+    async def wait_until_serving(self, timeout: float = 30.0) -> None:
+        """Polls health until the server is SERVING; raises :class:`Unavailable` after ``timeout`` seconds."""
+        end = time.monotonic() + timeout
+        last = "no answer"
+        while True:
+            try:
+                last = await self.health(timeout=max(0.05, min(1.0, end - time.monotonic())))
+                if last == "SERVING":
+                    return
+            except Exception as e:  # noqa: BLE001 - any failure means "not yet"
+                last = str(e)
+            if time.monotonic() >= end:
+                raise Unavailable(f"server {self.settings.address} not SERVING after {timeout} s (last: {last})")
+            await asyncio.sleep(0.05)
+
+    async def list_models(self, *, timeout: float | None = None) -> list[models_pb2.ModelInfo]:
+        """Every loaded model version, by name then version."""
+        return list((await self._unary(self._models.ListModels, models_pb2.ListModelsRequest(), timeout)).models)
+
+    async def get_model(self, model: str, version: int = 0, *, timeout: float | None = None) -> models_pb2.ModelInfo:
+        """One model version's description: state, parameters, controls (with units and bounds), TEB table."""
+        request = models_pb2.GetModelRequest(model=convert.model_ref(model, version))
+        info = (await self._unary(self._models.GetModel, request, timeout)).model
+        self._dims[(model, version)] = convert.Dims.of(info)
+        return info
+
+    async def dims(self, model: str, version: int = 0) -> convert.Dims:
+        """The model's vector sizes, fetched once (``GetModel``) and cached."""
+        found = self._dims.get((model, version))
+        if found is None:
+            await self.get_model(model, version)
+            found = self._dims[(model, version)]
+        return found
+
+    async def query_planner_control(
+        self, model: str, d_obs: float | None = None, *, version: int = 0, timeout: float | None = None
+    ) -> results.PlannerControl:
+        """queryPlannerControl for an obstacle at ``d_obs`` metres (None: none sensed)."""
+        request = safety_pb2.QueryPlannerControlRequest(model=convert.model_ref(model, version))
+        if d_obs is not None:
+            request.d_obs = float(d_obs)
+        return convert.planner_control(await self._unary(self._safety.QueryPlannerControl, request, timeout))
+
+    async def tracking_error_bound(
+        self,
+        model: str,
+        beta: float,
+        boundary_points: int = 0,
+        *,
+        version: int = 0,
+        timeout: float | None = None,
+    ) -> results.TrackingErrorBound:
+        """The tracking error bound for planner speed bound ``beta`` (m/s)."""
+        request = safety_pb2.GetTrackingErrorBoundRequest(
+            model=convert.model_ref(model, version), beta=beta, boundary_points=boundary_points
+        )
+        return convert.tracking_error_bound(await self._unary(self._safety.GetTrackingErrorBound, request, timeout))
+
+    async def evaluate(
+        self,
+        model: str,
+        states: npt.ArrayLike,
+        params: npt.ArrayLike,
+        *,
+        out_of_domain: convert.OutOfDomain = "default",
+        version: int = 0,
+        timeout: float | None = None,
+    ) -> results.Evaluation:
+        """V, dV/dr, u* and TEB membership for a batch (see :meth:`fastrack.Client.evaluate`)."""
+        dims = await self.dims(model, version)
+        s, p, n = convert.batch(dims, states, params)
+        request = safety_pb2.EvaluateValueRequest(
+            model=convert.model_ref(model, version), states=s, params=p, out_of_domain=convert.policy(out_of_domain)
+        )
+        return convert.evaluation(await self._unary(self._safety.EvaluateValue, request, timeout), dims, n)
+
+    async def tracking_control(
+        self,
+        model: str,
+        states: npt.ArrayLike,
+        params: npt.ArrayLike,
+        *,
+        out_of_domain: convert.OutOfDomain = "default",
+        version: int = 0,
+        timeout: float | None = None,
+    ) -> results.TrackingControl:
+        """The optimal tracking control u* for a batch (see :meth:`fastrack.Client.evaluate`)."""
+        dims = await self.dims(model, version)
+        s, p, n = convert.batch(dims, states, params)
+        request = safety_pb2.TrackingControlRequest(
+            model=convert.model_ref(model, version), states=s, params=p, out_of_domain=convert.policy(out_of_domain)
+        )
+        return convert.tracking_control(await self._unary(self._safety.TrackingControl, request, timeout), dims, n)
+
+    def track(self, model: str, *, version: int = 0, idle_timeout: float = 0.0) -> _TrackOpener:
+        """A ``Track`` stream for one robot: ``async with client.track("dubins4d") as robot``."""
+        return _TrackOpener(self, model, version, idle_timeout)
+
+    async def open_track(self, model: str, *, version: int = 0, idle_timeout: float = 0.0) -> AsyncTrackStream:
+        """Opens a ``Track`` stream (close it with ``await stream.close()``); :meth:`track` does both."""
+        dims = await self.dims(model, version)
+        call = self._safety.Track(metadata=self.settings.metadata)
+        return await AsyncTrackStream(call, dims, convert.open_stream(model, version, idle_timeout)).open()
+
+    async def load_model(self, name: str, version: int = 0, *, timeout: float | None = None) -> list[int]:
+        """Admin: loads a model (version 0: every version); the loaded versions."""
+        request = models_pb2.LoadModelRequest(name=name, version=version)
+        return list((await self._unary(self._admin.LoadModel, request, timeout, retry=False)).loaded_versions)
+
+    async def unload_model(self, name: str, version: int = 0, *, timeout: float | None = None) -> list[int]:
+        """Admin: stops serving a model (version 0: every version); the unloaded versions."""
+        request = models_pb2.UnloadModelRequest(name=name, version=version)
+        return list((await self._unary(self._admin.UnloadModel, request, timeout, retry=False)).unloaded_versions)
+
+    async def reload_model(self, name: str = "", *, timeout: float | None = None) -> list[models_pb2.ReloadOutcome]:
+        """Admin: re-reads a model (empty name: the whole repository) from disk."""
+        request = models_pb2.ReloadModelRequest(name=name)
+        return list((await self._unary(self._admin.ReloadModel, request, timeout, retry=False)).outcomes)
+
+    async def close(self) -> None:
+        """Closes the connection (open streams end)."""
+        await self.channel.close()
+
+    async def __aenter__(self) -> AsyncClient:
+        return self
+
+    async def __aexit__(
+        self, kind: type[BaseException] | None, error: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        await self.close()
+
+
+class _TrackOpener:
+    """``async with client.track(...) as robot``: opens the stream on entry, closes it on exit."""
+
+    def __init__(self, client: AsyncClient, model: str, version: int, idle_timeout: float) -> None:
+        self._client, self._model, self._version, self._idle_timeout = client, model, version, idle_timeout
+        self._stream: AsyncTrackStream | None = None
+
+    async def __aenter__(self) -> AsyncTrackStream:
+        self._stream = await self._client.open_track(
+            self._model, version=self._version, idle_timeout=self._idle_timeout
+        )
+        return self._stream
+
+    async def __aexit__(
+        self, kind: type[BaseException] | None, error: BaseException | None, tb: TracebackType | None
+    ) -> None:
+        if self._stream is not None:
+            await self._stream.close(cancel=error is not None)

@@ -1,0 +1,223 @@
+"""The synchronous client, :class:`Client`."""
+
+from __future__ import annotations
+
+import time
+from types import TracebackType
+from typing import TypeVar
+
+import grpc
+import numpy.typing as npt
+from google.protobuf.message import Message
+from grpc_health.v1 import health_pb2
+
+from . import convert, results
+from .channel import DEFAULT_TIMEOUT_S, NO_RETRY, Retry, Settings, Tls
+from .errors import Unavailable, from_rpc_error
+from .track import TrackStream
+from .v1 import models_pb2, models_pb2_grpc, safety_pb2, safety_pb2_grpc
+
+Request = TypeVar("Request", bound=Message)
+Response = TypeVar("Response", bound=Message)
+
+HEALTH_CHECK = "/grpc.health.v1.Health/Check"
+
+
+class Client:
+    """A connection to one fastrack server (``fastrack.v1`` over gRPC); thread-safe, cheap to share.
+
+    ``address`` is ``host:port`` (or ``http://host:port``; ``https://host:port`` with ``tls``). ``timeout``
+    is the default deadline of unary calls in seconds (each method takes its own ``timeout`` too);
+    ``token`` is sent as ``authorization: Bearer <token>``; ``retry`` says how idempotent unary calls are
+    retried on ``UNAVAILABLE`` (never ``Track`` nor the admin calls). Use as a context manager, or call
+    :meth:`close`. Models are named by ``model`` (e.g. ``"dubins4d"``) and ``version`` (0: the server's
+    default version).
+    """
+
+    def __init__(
+        self,
+        address: str = "127.0.0.1:50051",
+        *,
+        timeout: float = DEFAULT_TIMEOUT_S,
+        token: str | None = None,
+        tls: Tls | None = None,
+        retry: Retry = Retry(),
+        max_reconnect_backoff: float = 1.0,
+    ) -> None:
+        self.settings = Settings(address, timeout, token, tls, retry, max_reconnect_backoff)
+        self.channel: grpc.Channel = self.settings.sync_channel()
+        self._models = models_pb2_grpc.ModelServiceStub(self.channel)
+        self._admin = models_pb2_grpc.ModelAdminServiceStub(self.channel)
+        self._safety = safety_pb2_grpc.SafetyServiceStub(self.channel)
+        self._health: grpc.UnaryUnaryMultiCallable[health_pb2.HealthCheckRequest, health_pb2.HealthCheckResponse] = (
+            self.channel.unary_unary(
+                HEALTH_CHECK,
+                request_serializer=health_pb2.HealthCheckRequest.SerializeToString,
+                response_deserializer=health_pb2.HealthCheckResponse.FromString,
+            )
+        )
+        self._dims: dict[tuple[str, int], convert.Dims] = {}
+
+    def _unary(
+        self,
+        rpc: grpc.UnaryUnaryMultiCallable[Request, Response],
+        request: Request,
+        timeout: float | None,
+        retry: bool = True,
+    ) -> Response:
+        """One unary call with the token and deadline, retried on UNAVAILABLE if ``retry``."""
+        policy = self.settings.retry if retry else NO_RETRY
+        deadline = self.settings.timeout if timeout is None else timeout
+        for attempt in range(policy.attempts):
+            try:
+                return rpc(request, timeout=deadline, metadata=self.settings.metadata)
+            except grpc.RpcError as e:
+                error = from_rpc_error(e)
+            if not isinstance(error, Unavailable) or attempt + 1 == policy.attempts:
+                raise error
+            time.sleep(policy.delay(attempt))
+        raise AssertionError("unreachable: Retry.attempts >= 1")
+
+    def health(self, service: str = "", *, timeout: float | None = None) -> str:
+        """The server's health (``grpc.health.v1``): ``"SERVING"``, ``"NOT_SERVING"``, ..."""
+        request = health_pb2.HealthCheckRequest(service=service)
+        reply = self._unary(self._health, request, timeout, retry=False)
+        return health_pb2.HealthCheckResponse.ServingStatus.Name(reply.status)
+
+    def wait_until_serving(self, timeout: float = 30.0) -> None:
+        """Polls health until the server is SERVING; raises :class:`Unavailable` after ``timeout`` seconds."""
+        end = time.monotonic() + timeout
+        last = "no answer"
+        while True:
+            try:
+                last = self.health(timeout=max(0.05, min(1.0, end - time.monotonic())))
+                if last == "SERVING":
+                    return
+            except Exception as e:  # noqa: BLE001 - any failure means "not yet"
+                last = str(e)
+            if time.monotonic() >= end:
+                raise Unavailable(f"server {self.settings.address} not SERVING after {timeout} s (last: {last})")
+            time.sleep(0.05)
+
+    def list_models(self, *, timeout: float | None = None) -> list[models_pb2.ModelInfo]:
+        """Every loaded model version, by name then version."""
+        return list(self._unary(self._models.ListModels, models_pb2.ListModelsRequest(), timeout).models)
+
+    def get_model(self, model: str, version: int = 0, *, timeout: float | None = None) -> models_pb2.ModelInfo:
+        """One model version's description: state, parameters, controls (with units and bounds), TEB table."""
+        request = models_pb2.GetModelRequest(model=convert.model_ref(model, version))
+        info = self._unary(self._models.GetModel, request, timeout).model
+        self._dims[(model, version)] = convert.Dims.of(info)
+        return info
+
+    def dims(self, model: str, version: int = 0) -> convert.Dims:
+        """The model's vector sizes, fetched once (``GetModel``) and cached."""
+        found = self._dims.get((model, version))
+        if found is None:
+            self.get_model(model, version)
+            found = self._dims[(model, version)]
+        return found
+
+    def query_planner_control(
+        self, model: str, d_obs: float | None = None, *, version: int = 0, timeout: float | None = None
+    ) -> results.PlannerControl:
+        """queryPlannerControl: the fastest planner speed bound whose TEB fits ``d_obs / 2``.
+
+        ``d_obs`` is the distance from the tracker to the nearest sensed obstacle, metres (None: none sensed,
+        the fastest beta is returned).
+        """
+        request = safety_pb2.QueryPlannerControlRequest(model=convert.model_ref(model, version))
+        if d_obs is not None:
+            request.d_obs = float(d_obs)
+        return convert.planner_control(self._unary(self._safety.QueryPlannerControl, request, timeout))
+
+    def tracking_error_bound(
+        self,
+        model: str,
+        beta: float,
+        boundary_points: int = 0,
+        *,
+        version: int = 0,
+        timeout: float | None = None,
+    ) -> results.TrackingErrorBound:
+        """The tracking error bound for planner speed bound ``beta`` (m/s, within the model's range), with
+        ``boundary_points`` points on its boundary (0: none, at most 4096)."""
+        request = safety_pb2.GetTrackingErrorBoundRequest(
+            model=convert.model_ref(model, version), beta=beta, boundary_points=boundary_points
+        )
+        return convert.tracking_error_bound(self._unary(self._safety.GetTrackingErrorBound, request, timeout))
+
+    def evaluate(
+        self,
+        model: str,
+        states: npt.ArrayLike,
+        params: npt.ArrayLike,
+        *,
+        out_of_domain: convert.OutOfDomain = "default",
+        version: int = 0,
+        timeout: float | None = None,
+    ) -> results.Evaluation:
+        """V, dV/dr, the optimal control u* and TEB membership for a batch.
+
+        ``states`` are relative states r [N, n_state] (dubins4d: x_r m, y_r m, theta rad, v m/s); ``params``
+        [N, n_params] (dubins4d: beta_1, beta_2 in m/s), or one row (or number) for every item. Shapes are
+        checked against the model before sending.
+        """
+        dims = self.dims(model, version)
+        s, p, n = convert.batch(dims, states, params)
+        request = safety_pb2.EvaluateValueRequest(
+            model=convert.model_ref(model, version), states=s, params=p, out_of_domain=convert.policy(out_of_domain)
+        )
+        return convert.evaluation(self._unary(self._safety.EvaluateValue, request, timeout), dims, n)
+
+    def tracking_control(
+        self,
+        model: str,
+        states: npt.ArrayLike,
+        params: npt.ArrayLike,
+        *,
+        out_of_domain: convert.OutOfDomain = "default",
+        version: int = 0,
+        timeout: float | None = None,
+    ) -> results.TrackingControl:
+        """The optimal tracking control u* (with V and TEB membership) for a batch; arguments as :meth:`evaluate`."""
+        dims = self.dims(model, version)
+        s, p, n = convert.batch(dims, states, params)
+        request = safety_pb2.TrackingControlRequest(
+            model=convert.model_ref(model, version), states=s, params=p, out_of_domain=convert.policy(out_of_domain)
+        )
+        return convert.tracking_control(self._unary(self._safety.TrackingControl, request, timeout), dims, n)
+
+    def track(self, model: str, *, version: int = 0, idle_timeout: float = 0.0) -> TrackStream:
+        """Opens a ``Track`` stream for one robot (no deadline; the server closes it after ``idle_timeout``
+        seconds without a tick, 0: the server's default). Use as ``with client.track("dubins4d") as robot``."""
+        dims = self.dims(model, version)
+        return TrackStream(
+            self._safety.Track, self.settings.metadata, dims, convert.open_stream(model, version, idle_timeout)
+        )
+
+    def load_model(self, name: str, version: int = 0, *, timeout: float | None = None) -> list[int]:
+        """Admin: loads a model from the server's repository (version 0: every version); the loaded versions."""
+        request = models_pb2.LoadModelRequest(name=name, version=version)
+        return list(self._unary(self._admin.LoadModel, request, timeout, retry=False).loaded_versions)
+
+    def unload_model(self, name: str, version: int = 0, *, timeout: float | None = None) -> list[int]:
+        """Admin: stops serving a model (version 0: every version); the unloaded versions."""
+        request = models_pb2.UnloadModelRequest(name=name, version=version)
+        return list(self._unary(self._admin.UnloadModel, request, timeout, retry=False).unloaded_versions)
+
+    def reload_model(self, name: str = "", *, timeout: float | None = None) -> list[models_pb2.ReloadOutcome]:
+        """Admin: re-reads a model (empty name: the whole repository) from disk; one outcome per version."""
+        request = models_pb2.ReloadModelRequest(name=name)
+        return list(self._unary(self._admin.ReloadModel, request, timeout, retry=False).outcomes)
+
+    def close(self) -> None:
+        """Closes the connection (open streams end)."""
+        self.channel.close()
+
+    def __enter__(self) -> Client:
+        return self
+
+    def __exit__(self, kind: type[BaseException] | None, error: BaseException | None, tb: TracebackType | None) -> None:
+        self.close()
+
