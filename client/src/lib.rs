@@ -11,6 +11,11 @@
 
 pub use fastrack_proto::v1 as pb;
 
+mod replicas;
+mod track;
+
+pub use track::TrackStream;
+
 /// The README's Rust example, compiled as a doctest so that it cannot drift from this crate.
 #[cfg(doctest)]
 #[doc = include_str!("../../README.md")]
@@ -21,8 +26,9 @@ use pb::model_service_client::ModelServiceClient;
 use pb::safety_service_client::SafetyServiceClient;
 use rustls_pki_types::pem::PemObject;
 use rustls_pki_types::{CertificateDer, PrivateKeyDer};
+use std::future::Future;
+use std::sync::Arc;
 use std::time::Duration;
-use tokio_stream::wrappers::ReceiverStream;
 use tonic::metadata::AsciiMetadataValue;
 use tonic::transport::{Certificate, Channel, ClientTlsConfig, Endpoint, Identity};
 pub use tonic_health::pb::health_check_response::ServingStatus as HealthStatus;
@@ -170,7 +176,7 @@ impl ClientError {
 }
 
 /// `Code: message`, with the causes of transport failures (e.g. a refused client certificate) appended.
-fn status_text(status: &tonic::Status) -> String {
+pub(crate) fn status_text(status: &tonic::Status) -> String {
     let mut text = format!("{:?}: {}", status.code(), status.message());
     if let Some(source) = std::error::Error::source(status) {
         text += &format!(" ({})", error_chain(source));
@@ -189,60 +195,92 @@ fn error_chain(error: &dyn std::error::Error) -> String {
     text
 }
 
+/// The settings of one replica's connection; `server_name`: the host name its certificate is verified
+/// against, when the endpoint is an address resolved from it.
+fn endpoint_builder(
+    endpoint: &str,
+    server_name: Option<String>,
+    options: &ClientOptions,
+) -> Result<Endpoint, ClientError> {
+    let invalid = |reason: String| ClientError::InvalidEndpoint { endpoint: endpoint.into(), reason };
+    let mut builder = Endpoint::from_shared(endpoint.to_string())
+        .map_err(|e| invalid(e.to_string()))?
+        .connect_timeout(options.connect_timeout)
+        .tcp_nodelay(true);
+    let https = builder.uri().scheme_str() == Some("https");
+    match &options.tls {
+        Some(tls) => {
+            if !https {
+                return Err(invalid("TLS is configured: the address must start with https://".into()));
+            }
+            let mut config = tls.config()?;
+            if let (None, Some(name)) = (&tls.domain, server_name) {
+                config = config.domain_name(name);
+            }
+            builder = builder
+                .tls_config(config)
+                .map_err(|e| ClientError::Tls { what: "configuration", reason: error_chain(&e) })?;
+        }
+        None if https => return Err(invalid("an https:// address needs TLS settings (a CA certificate)".into())),
+        None => {}
+    }
+    Ok(builder)
+}
+
 /// `ModelRef` for `name` at `version` (0 = latest).
 pub fn model_ref(name: &str, version: u32) -> pb::ModelRef {
     pb::ModelRef { name: name.into(), version }
 }
 
-/// A connection to one server; cheap to clone.
+/// A connection to a server, or to the replicas of one (round-robin, call by call); cheap to clone.
+///
+/// Idempotent calls that find a replica gone (`UNAVAILABLE`) are made again on the next one, each replica at
+/// most once; admin calls go to one replica and are not repeated; `Track` streams move to another replica
+/// when theirs goes away ([`TrackStream`]).
 #[derive(Debug, Clone)]
 pub struct FastrackClient {
-    channel: Channel,
+    replicas: Arc<replicas::Replicas>,
     request_timeout: Duration,
     /// `Bearer <token>`, sent as `authorization` on every call.
     authorization: Option<AsciiMetadataValue>,
 }
 
 impl FastrackClient {
-    /// Connects to `endpoint` (e.g. `http://127.0.0.1:50051`, or `https://...` with `options.tls`).
-    pub async fn connect(endpoint: &str, options: ClientOptions) -> Result<Self, ClientError> {
-        let invalid = |reason: String| ClientError::InvalidEndpoint { endpoint: endpoint.into(), reason };
+    /// Connects to `address`: one endpoint (e.g. `http://127.0.0.1:50051`, or `https://...` with
+    /// `options.tls`), several separated by commas, or one whose host name resolves to several addresses
+    /// (e.g. a Kubernetes headless Service); each address is a replica. Succeeds when at least one replica
+    /// answers; the others are connected when they come up.
+    pub async fn connect(address: &str, options: ClientOptions) -> Result<Self, ClientError> {
         let authorization = options
             .bearer_token
             .as_ref()
             .map(|token| format!("Bearer {token}").parse::<AsciiMetadataValue>().map_err(|_| ClientError::InvalidToken))
             .transpose()?;
-        let mut builder = Endpoint::from_shared(endpoint.to_string())
-            .map_err(|e| invalid(e.to_string()))?
-            .connect_timeout(options.connect_timeout)
-            .tcp_nodelay(true);
-        let https = builder.uri().scheme_str() == Some("https");
-        match &options.tls {
-            Some(tls) => {
-                if !https {
-                    return Err(invalid("TLS is configured: the address must start with https://".into()));
-                }
-                builder = builder
-                    .tls_config(tls.config()?)
-                    .map_err(|e| ClientError::Tls { what: "configuration", reason: error_chain(&e) })?;
-            }
-            None if https => {
-                return Err(invalid("an https:// address needs TLS settings (a CA certificate)".into()));
-            }
-            None => {}
+        let mut builders = Vec::new();
+        for (endpoint, server_name) in replicas::resolve(address).await? {
+            let builder = endpoint_builder(&endpoint, server_name, &options)?;
+            builders.push((endpoint, builder));
         }
-        let channel =
-            builder.connect().await.map_err(|source| ClientError::Connect { endpoint: endpoint.into(), source })?;
-        Ok(Self { channel, request_timeout: options.request_timeout, authorization })
+        let replicas = replicas::connect_all(builders).await?;
+        Ok(Self { replicas: Arc::new(replicas), request_timeout: options.request_timeout, authorization })
+    }
+
+    /// The endpoints of the replicas, in round-robin order.
+    pub fn endpoints(&self) -> Vec<&str> {
+        self.replicas.endpoints()
     }
 
     /// The same connection with another per-call deadline.
     pub fn with_deadline(&self, deadline: Duration) -> Self {
-        Self { channel: self.channel.clone(), request_timeout: deadline, authorization: self.authorization.clone() }
+        Self {
+            replicas: Arc::clone(&self.replicas),
+            request_timeout: deadline,
+            authorization: self.authorization.clone(),
+        }
     }
 
     /// A request carrying the bearer token, without deadline.
-    fn authorized<T>(&self, message: T) -> tonic::Request<T> {
+    pub(crate) fn authorized<T>(&self, message: T) -> tonic::Request<T> {
         let mut request = tonic::Request::new(message);
         if let Some(value) = &self.authorization {
             request.metadata_mut().insert("authorization", value.clone());
@@ -257,14 +295,29 @@ impl FastrackClient {
         request
     }
 
-    fn safety(&self) -> SafetyServiceClient<Channel> {
-        SafetyServiceClient::new(self.channel.clone())
+    /// An idempotent unary call: on the next replica, and again on the following ones while they answer
+    /// `UNAVAILABLE` (each replica at most once).
+    async fn idempotent<M, R, F, Fut>(&self, message: M, call: F) -> Result<R, ClientError>
+    where
+        M: Clone,
+        F: Fn(Channel, tonic::Request<M>) -> Fut,
+        Fut: Future<Output = Result<tonic::Response<R>, tonic::Status>>,
+    {
+        let mut last = None;
+        for replica in self.replicas.rotation() {
+            match call(replica.channel.clone(), self.request(message.clone())).await {
+                Ok(response) => return Ok(response.into_inner()),
+                Err(status) if status.code() == tonic::Code::Unavailable => last = Some(status),
+                Err(status) => return Err(status.into()),
+            }
+        }
+        Err(last.unwrap_or_else(|| tonic::Status::unavailable("no replica")).into())
     }
 
-    /// Overall health (`grpc.health.v1`, service "").
+    /// Overall health (`grpc.health.v1`, service "") of the next replica.
     pub async fn health(&self) -> Result<HealthStatus, ClientError> {
         let request = self.request(tonic_health::pb::HealthCheckRequest { service: String::new() });
-        let response = HealthClient::new(self.channel.clone()).check(request).await?;
+        let response = HealthClient::new(self.replicas.next().channel.clone()).check(request).await?;
         Ok(response.into_inner().status())
     }
 
@@ -284,16 +337,15 @@ impl FastrackClient {
 
     /// Every loaded model version.
     pub async fn list_models(&self) -> Result<Vec<pb::ModelInfo>, ClientError> {
-        let response =
-            ModelServiceClient::new(self.channel.clone()).list_models(self.request(pb::ListModelsRequest {})).await?;
-        Ok(response.into_inner().models)
+        let call = |channel, request| async move { ModelServiceClient::new(channel).list_models(request).await };
+        Ok(self.idempotent(pb::ListModelsRequest {}, call).await?.models)
     }
 
     /// One model version's description.
     pub async fn get_model(&self, model: pb::ModelRef) -> Result<pb::ModelInfo, ClientError> {
-        let request = self.request(pb::GetModelRequest { model: Some(model) });
-        let response = ModelServiceClient::new(self.channel.clone()).get_model(request).await?;
-        response.into_inner().model.ok_or_else(|| tonic::Status::internal("GetModel answered without a model").into())
+        let call = |channel, request| async move { ModelServiceClient::new(channel).get_model(request).await };
+        let response = self.idempotent(pb::GetModelRequest { model: Some(model) }, call).await?;
+        response.model.ok_or_else(|| tonic::Status::internal("GetModel answered without a model").into())
     }
 
     /// queryPlannerControl: the fastest planner speed bound whose TEB fits `d_obs / 2`.
@@ -302,8 +354,9 @@ impl FastrackClient {
         model: pb::ModelRef,
         d_obs: Option<f64>,
     ) -> Result<pb::QueryPlannerControlResponse, ClientError> {
-        let request = self.request(pb::QueryPlannerControlRequest { model: Some(model), d_obs });
-        Ok(self.safety().query_planner_control(request).await?.into_inner())
+        let call =
+            |channel, request| async move { SafetyServiceClient::new(channel).query_planner_control(request).await };
+        self.idempotent(pb::QueryPlannerControlRequest { model: Some(model), d_obs }, call).await
     }
 
     /// The TEB at `beta`, with `boundary_points` boundary points (0 for none).
@@ -313,8 +366,10 @@ impl FastrackClient {
         beta: f64,
         boundary_points: u32,
     ) -> Result<pb::GetTrackingErrorBoundResponse, ClientError> {
-        let request = self.request(pb::GetTrackingErrorBoundRequest { model: Some(model), beta, boundary_points });
-        Ok(self.safety().get_tracking_error_bound(request).await?.into_inner())
+        let message = pb::GetTrackingErrorBoundRequest { model: Some(model), beta, boundary_points };
+        let call =
+            |channel, request| async move { SafetyServiceClient::new(channel).get_tracking_error_bound(request).await };
+        self.idempotent(message, call).await
     }
 
     /// `V`, `dV/dr`, `u*` and flags for a batch (`states` `[N x n_state]`, `params` `[N x n_params]`).
@@ -325,13 +380,10 @@ impl FastrackClient {
         params: Vec<f64>,
         out_of_domain: pb::OutOfDomainPolicy,
     ) -> Result<pb::EvaluateValueResponse, ClientError> {
-        let request = self.request(pb::EvaluateValueRequest {
-            model: Some(model),
-            states,
-            params,
-            out_of_domain: out_of_domain as i32,
-        });
-        Ok(self.safety().evaluate_value(request).await?.into_inner())
+        let message =
+            pb::EvaluateValueRequest { model: Some(model), states, params, out_of_domain: out_of_domain as i32 };
+        let call = |channel, request| async move { SafetyServiceClient::new(channel).evaluate_value(request).await };
+        self.idempotent(message, call).await
     }
 
     /// Optimal tracking control for a batch.
@@ -342,28 +394,20 @@ impl FastrackClient {
         params: Vec<f64>,
         out_of_domain: pb::OutOfDomainPolicy,
     ) -> Result<pb::TrackingControlResponse, ClientError> {
-        let request = self.request(pb::TrackingControlRequest {
-            model: Some(model),
-            states,
-            params,
-            out_of_domain: out_of_domain as i32,
-        });
-        Ok(self.safety().tracking_control(request).await?.into_inner())
+        let message =
+            pb::TrackingControlRequest { model: Some(model), states, params, out_of_domain: out_of_domain as i32 };
+        let call = |channel, request| async move { SafetyServiceClient::new(channel).tracking_control(request).await };
+        self.idempotent(message, call).await
     }
 
-    /// Opens a `Track` stream (no deadline: it lives as long as the robot runs).
+    /// Opens a `Track` stream on the next replica (no deadline: it lives as long as the robot runs).
     pub async fn track(&self, model: pb::ModelRef, idle_timeout_s: f64) -> Result<TrackStream, ClientError> {
-        let (tx, rx) = tokio::sync::mpsc::channel(64);
-        let open = pb::TrackRequest {
-            msg: Some(pb::track_request::Msg::Open(pb::TrackOpen { model: Some(model), idle_timeout_s })),
-        };
-        tx.send(open).await.map_err(|_| tonic::Status::internal("stream closed"))?;
-        let replies = self.safety().track(self.authorized(ReceiverStream::new(rx))).await?.into_inner();
-        Ok(TrackStream { ticks: tx, replies })
+        TrackStream::open(self, pb::TrackOpen { model: Some(model), idle_timeout_s }).await
     }
 
+    /// The admin service of the next replica: admin calls change one replica's repository.
     fn admin(&self) -> ModelAdminServiceClient<Channel> {
-        ModelAdminServiceClient::new(self.channel.clone())
+        ModelAdminServiceClient::new(self.replicas.next().channel.clone())
     }
 
     /// Loads a model (version 0: every version on disk).
@@ -382,31 +426,6 @@ impl FastrackClient {
     pub async fn reload_model(&self, name: &str) -> Result<Vec<pb::ReloadOutcome>, ClientError> {
         let request = self.request(pb::ReloadModelRequest { name: name.into() });
         Ok(self.admin().reload_model(request).await?.into_inner().outcomes)
-    }
-}
-
-/// An open `Track` stream: send ticks, read replies in order.
-pub struct TrackStream {
-    ticks: tokio::sync::mpsc::Sender<pb::TrackRequest>,
-    replies: tonic::Streaming<pb::TrackResponse>,
-}
-
-impl TrackStream {
-    /// Sends one tick without waiting for its reply.
-    pub async fn send(&self, tick: pb::TrackTick) -> Result<(), ClientError> {
-        let request = pb::TrackRequest { msg: Some(pb::track_request::Msg::Tick(tick)) };
-        self.ticks.send(request).await.map_err(|_| tonic::Status::unavailable("Track stream closed").into())
-    }
-
-    /// The next reply (`None` when the server closed the stream).
-    pub async fn recv(&mut self) -> Result<Option<pb::TrackReply>, ClientError> {
-        Ok(self.replies.message().await?.and_then(|r| r.reply))
-    }
-
-    /// Sends a tick and waits for its reply.
-    pub async fn tick(&mut self, tick: pb::TrackTick) -> Result<pb::TrackReply, ClientError> {
-        self.send(tick).await?;
-        self.recv().await?.ok_or_else(|| tonic::Status::unavailable("Track stream closed by the server").into())
     }
 }
 

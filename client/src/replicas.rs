@@ -1,0 +1,117 @@
+//! The replicas a client talks to: one channel per server address, taken round-robin call by call.
+//!
+//! A server address is a list of endpoints separated by commas (`http://10.0.0.5:50051,http://10.0.0.6:50051`),
+//! or one endpoint whose host name resolves to several addresses (a Kubernetes headless Service): each address
+//! becomes a replica, verified under the host name when TLS is on. Names are resolved once, when connecting:
+//! a client made before a scale-up does not see the new replicas until it connects again.
+
+use crate::ClientError;
+use std::collections::hash_map::RandomState;
+use std::hash::{BuildHasher, Hasher};
+use std::sync::atomic::{AtomicUsize, Ordering};
+use tonic::transport::{Channel, Endpoint, Uri};
+
+/// The replicas of one client, shared by its clones.
+#[derive(Debug)]
+pub struct Replicas {
+    replicas: Vec<Replica>,
+    next: AtomicUsize,
+}
+
+/// One server: where it is and the channel to it (connected lazily if it was down when the client connected).
+#[derive(Debug, Clone)]
+pub struct Replica {
+    /// Its endpoint, `scheme://address:port`.
+    pub endpoint: String,
+    /// The channel to it.
+    pub channel: Channel,
+}
+
+impl Replicas {
+    /// The replicas, the first call going to a random one (so that many clients of one fleet spread their
+    /// first calls too).
+    pub fn new(replicas: Vec<Replica>) -> Self {
+        let start = RandomState::new().build_hasher().finish() as usize;
+        Self { replicas, next: AtomicUsize::new(start) }
+    }
+
+    /// The next replica in round-robin order.
+    pub fn next(&self) -> &Replica {
+        self.rotation().next().expect("a client has at least one replica")
+    }
+
+    /// Every replica once, from the next in round-robin order on: where a call goes, then where it goes again
+    /// if that replica is gone.
+    pub fn rotation(&self) -> impl Iterator<Item = &Replica> {
+        let (start, count) = (self.next.fetch_add(1, Ordering::Relaxed), self.replicas.len());
+        (0..count).map(move |k| &self.replicas[(start + k) % count])
+    }
+
+    /// Every replica's endpoint.
+    pub fn endpoints(&self) -> Vec<&str> {
+        self.replicas.iter().map(|r| r.endpoint.as_str()).collect()
+    }
+}
+
+/// The endpoints a server address names: its comma-separated parts, each host name resolved to every address
+/// it has. Returns `(endpoint, TLS server name)` pairs; the name is the host as written.
+pub async fn resolve(address: &str) -> Result<Vec<(String, Option<String>)>, ClientError> {
+    let invalid = |endpoint: &str, reason: String| ClientError::InvalidEndpoint { endpoint: endpoint.into(), reason };
+    let parts: Vec<&str> = address.split(',').map(str::trim).collect();
+    if parts.iter().any(|part| part.is_empty()) {
+        return Err(invalid(address, "an empty endpoint in the comma-separated list".into()));
+    }
+    let mut endpoints = Vec::new();
+    for part in parts {
+        let uri: Uri = part.parse().map_err(|e: tonic::codegen::http::uri::InvalidUri| invalid(part, e.to_string()))?;
+        let (Some(scheme), Some(host)) = (uri.scheme_str(), uri.host()) else {
+            return Err(invalid(part, "expected scheme://host:port, e.g. http://127.0.0.1:50051".into()));
+        };
+        let port = uri.port_u16().unwrap_or(if scheme == "https" { 443 } else { 80 });
+        let bare_host = host.trim_start_matches('[').trim_end_matches(']');
+        if bare_host.parse::<std::net::IpAddr>().is_ok() {
+            endpoints.push((part.to_string(), None));
+            continue;
+        }
+        let addresses = tokio::net::lookup_host((bare_host, port))
+            .await
+            .map_err(|e| invalid(part, format!("cannot resolve {host}: {e}")))?;
+        let mut found: Vec<std::net::SocketAddr> = addresses.collect();
+        found.sort();
+        found.dedup();
+        if found.is_empty() {
+            return Err(invalid(part, format!("{host} resolves to no address")));
+        }
+        for socket in found {
+            endpoints.push((format!("{scheme}://{socket}"), Some(host.to_string())));
+        }
+    }
+    Ok(endpoints)
+}
+
+/// Connects to every endpoint; one that cannot be reached now is kept, connected lazily (it may come back),
+/// as long as one can be reached.
+pub async fn connect_all(builders: Vec<(String, Endpoint)>) -> Result<Replicas, ClientError> {
+    if builders.is_empty() {
+        return Err(ClientError::InvalidEndpoint { endpoint: String::new(), reason: "no endpoint given".into() });
+    }
+    let mut replicas = Vec::with_capacity(builders.len());
+    let (mut reached, mut first_error) = (0, None);
+    for (endpoint, builder) in builders {
+        let channel = match builder.connect().await {
+            Ok(channel) => {
+                reached += 1;
+                channel
+            }
+            Err(source) => {
+                first_error.get_or_insert(ClientError::Connect { endpoint: endpoint.clone(), source });
+                builder.connect_lazy()
+            }
+        };
+        replicas.push(Replica { endpoint, channel });
+    }
+    match first_error {
+        Some(error) if reached == 0 => Err(error),
+        _ => Ok(Replicas::new(replicas)),
+    }
+}

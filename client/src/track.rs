@@ -1,0 +1,160 @@
+//! `Track` streams that survive the loss of a replica.
+//!
+//! A stream remembers the ticks it sent and that are not answered yet. When its server goes away (the stream
+//! ends with `UNAVAILABLE`, as a draining replica's streams do, its connection breaks, as a killed replica's
+//! does, or it closes with ticks unanswered), it
+//! reopens on the client's next replica and sends those ticks again, so every tick is answered exactly once
+//! as seen by the robot. Nothing else needs carrying over: the server keeps no state a robot cannot resend,
+//! except `beta_old`, which starts again at `beta_u` on the new replica (the reply's `beta_old` says so; a
+//! robot's own loop keeps its own).
+
+use crate::{pb, ClientError, FastrackClient};
+use std::collections::VecDeque;
+use tokio_stream::wrappers::ReceiverStream;
+
+/// Ticks buffered between the robot and the connection.
+const SEND_BUFFER: usize = 64;
+
+/// An open `Track` stream: send ticks, read replies in order.
+pub struct TrackStream {
+    client: FastrackClient,
+    open: pb::TrackOpen,
+    endpoint: String,
+    ticks: tokio::sync::mpsc::Sender<pb::TrackRequest>,
+    replies: tonic::Streaming<pb::TrackResponse>,
+    /// Sent and not answered yet, oldest first.
+    unanswered: VecDeque<pb::TrackTick>,
+    /// The replica went away with nothing unanswered: the next send reopens.
+    lost: bool,
+    reopened: usize,
+    resent: usize,
+}
+
+/// A stream on one replica.
+struct Opened {
+    endpoint: String,
+    ticks: tokio::sync::mpsc::Sender<pb::TrackRequest>,
+    replies: tonic::Streaming<pb::TrackResponse>,
+}
+
+/// True when `status` means the replica is gone rather than the stream refused, so the stream may go on
+/// elsewhere: `UNAVAILABLE` (unreachable, or draining), or a connection that broke under the stream (an
+/// `UNKNOWN` status made by the transport, not sent by a server: it carries the transport's error).
+fn replica_lost(status: &tonic::Status) -> bool {
+    match status.code() {
+        tonic::Code::Unavailable => true,
+        tonic::Code::Unknown => std::error::Error::source(status).is_some(),
+        _ => false,
+    }
+}
+
+impl TrackStream {
+    /// Opens a stream for `open` on the client's next replica that takes it (each replica tried once).
+    pub(crate) async fn open(client: &FastrackClient, open: pb::TrackOpen) -> Result<Self, ClientError> {
+        let opened = Self::open_somewhere(client, &open).await?;
+        Ok(Self {
+            client: client.clone(),
+            open,
+            endpoint: opened.endpoint,
+            ticks: opened.ticks,
+            replies: opened.replies,
+            unanswered: VecDeque::new(),
+            lost: false,
+            reopened: 0,
+            resent: 0,
+        })
+    }
+
+    async fn open_somewhere(client: &FastrackClient, open: &pb::TrackOpen) -> Result<Opened, ClientError> {
+        let mut last = None;
+        for replica in client.replicas.rotation() {
+            let (tx, rx) = tokio::sync::mpsc::channel(SEND_BUFFER);
+            let message = pb::TrackRequest { msg: Some(pb::track_request::Msg::Open(open.clone())) };
+            tx.send(message).await.map_err(|_| tonic::Status::internal("stream closed before its open message"))?;
+            let call = pb::safety_service_client::SafetyServiceClient::new(replica.channel.clone())
+                .track(client.authorized(ReceiverStream::new(rx)))
+                .await;
+            match call {
+                Ok(response) => {
+                    return Ok(Opened { endpoint: replica.endpoint.clone(), ticks: tx, replies: response.into_inner() })
+                }
+                Err(status) if replica_lost(&status) => last = Some(status),
+                Err(status) => return Err(status.into()),
+            }
+        }
+        Err(last.unwrap_or_else(|| tonic::Status::unavailable("no replica to open a Track stream on")).into())
+    }
+
+    /// Reopens on another replica, after `why` ended the stream, and sends the unanswered ticks again.
+    async fn reopen(&mut self, why: &str) -> Result<(), ClientError> {
+        let opened = Self::open_somewhere(&self.client, &self.open).await.map_err(|e| {
+            ClientError::Status(tonic::Status::unavailable(format!("{why}; no replica took the stream again: {e}")))
+        })?;
+        (self.endpoint, self.ticks, self.replies) = (opened.endpoint, opened.ticks, opened.replies);
+        self.lost = false;
+        self.reopened += 1;
+        for tick in &self.unanswered {
+            let request = pb::TrackRequest { msg: Some(pb::track_request::Msg::Tick(tick.clone())) };
+            self.ticks.send(request).await.map_err(|_| tonic::Status::unavailable("Track stream closed"))?;
+        }
+        self.resent += self.unanswered.len();
+        Ok(())
+    }
+
+    /// Sends one tick without waiting for its reply.
+    pub async fn send(&mut self, tick: pb::TrackTick) -> Result<(), ClientError> {
+        self.unanswered.push_back(tick.clone());
+        if self.lost {
+            return self.reopen("the stream's replica went away").await;
+        }
+        let request = pb::TrackRequest { msg: Some(pb::track_request::Msg::Tick(tick)) };
+        if self.ticks.send(request).await.is_err() {
+            // The connection dropped the stream: go on elsewhere, this tick with the others unanswered.
+            self.reopen("the stream's connection closed").await?;
+        }
+        Ok(())
+    }
+
+    /// The next reply (`None` when the server closed the stream with every tick answered). A replica that
+    /// goes away with ticks unanswered is replaced and they are answered; one that goes away with none is
+    /// reported here, and the next send reopens the stream elsewhere.
+    pub async fn recv(&mut self) -> Result<Option<pb::TrackReply>, ClientError> {
+        loop {
+            match self.replies.message().await {
+                Ok(Some(response)) => {
+                    self.unanswered.pop_front();
+                    return Ok(response.reply);
+                }
+                Ok(None) if self.unanswered.is_empty() => return Ok(None),
+                Ok(None) => self.reopen("the server closed the stream with ticks unanswered").await?,
+                Err(status) if replica_lost(&status) && self.unanswered.is_empty() => {
+                    self.lost = true;
+                    return Err(status.into());
+                }
+                Err(status) if replica_lost(&status) => self.reopen(&crate::status_text(&status)).await?,
+                Err(status) => return Err(status.into()),
+            }
+        }
+    }
+
+    /// Sends a tick and waits for its reply.
+    pub async fn tick(&mut self, tick: pb::TrackTick) -> Result<pb::TrackReply, ClientError> {
+        self.send(tick).await?;
+        self.recv().await?.ok_or_else(|| tonic::Status::unavailable("Track stream closed by the server").into())
+    }
+
+    /// The endpoint of the replica serving the stream now.
+    pub fn endpoint(&self) -> &str {
+        &self.endpoint
+    }
+
+    /// How often the stream moved to another replica.
+    pub fn reopened(&self) -> usize {
+        self.reopened
+    }
+
+    /// Ticks sent again after a move, because their first replica never answered them.
+    pub fn resent(&self) -> usize {
+        self.resent
+    }
+}

@@ -1,0 +1,134 @@
+//! A client of several replicas: calls go round-robin, and when a replica dies mid-run every robot's `Track`
+//! stream moves to another one and goes on, each tick answered exactly once, in order.
+
+use fastrack_client::{model_ref, pb, ClientOptions, FastrackClient};
+use fastrack_e2e::{robot_tick, TestServer};
+use std::collections::BTreeMap;
+use std::path::Path;
+use std::sync::atomic::{AtomicBool, Ordering};
+use std::sync::Arc;
+use std::time::{Duration, Instant};
+
+const ROBOTS: u64 = 50;
+const TICKS: u64 = 400;
+/// Every robot must be served again this soon after its replica dies.
+const RECOVERY: Duration = Duration::from_secs(5);
+
+async fn replicas(count: usize) -> (Vec<TestServer>, FastrackClient) {
+    let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
+    let mut servers = Vec::new();
+    for _ in 0..count {
+        let (server, client) = TestServer::start_serving(&models).await;
+        drop(client);
+        servers.push(server);
+    }
+    let address = servers.iter().map(|s| s.endpoint.as_str()).collect::<Vec<_>>().join(",");
+    let options = ClientOptions { request_timeout: Duration::from_secs(10), ..ClientOptions::default() };
+    (servers, FastrackClient::connect(&address, options).await.unwrap())
+}
+
+/// What one robot saw.
+struct Robot {
+    first_endpoint: String,
+    reopened: usize,
+    resent: usize,
+    /// From the replica's death to this robot's next reply, if it was on that replica.
+    recovery: Option<Duration>,
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn robots_on_a_dead_replica_move_to_another_and_every_tick_is_answered_once() {
+    let (mut servers, client) = replicas(3).await;
+    assert_eq!(client.endpoints().len(), 3);
+    let killed_at: Arc<std::sync::Mutex<Option<Instant>>> = Arc::default();
+    let started = Arc::new(AtomicBool::new(false));
+    let mut robots = Vec::new();
+    for robot in 0..ROBOTS {
+        let (client, killed_at, started) = (client.clone(), Arc::clone(&killed_at), Arc::clone(&started));
+        robots.push(tokio::spawn(async move {
+            let mut stream = client.track(model_ref("dubins4d", 0), 0.0).await.unwrap();
+            let first_endpoint = stream.endpoint().to_string();
+            let mut recovery = None;
+            for seq in 0..TICKS {
+                if seq == 50 {
+                    started.store(true, Ordering::SeqCst);
+                }
+                let before = stream.reopened();
+                let reply = stream
+                    .tick(robot_tick(seq, robot))
+                    .await
+                    .unwrap_or_else(|e| panic!("robot {robot} tick {seq}: {e}"));
+                assert_eq!(reply.seq, seq, "robot {robot}: replies in order, each once");
+                assert!(reply.error.is_none(), "robot {robot} tick {seq}: {:?}", reply.error);
+                if stream.reopened() > before {
+                    let killed = killed_at.lock().unwrap().expect("a move only after the kill");
+                    recovery = Some(killed.elapsed());
+                }
+                tokio::time::sleep(Duration::from_millis(2)).await;
+            }
+            Robot { first_endpoint, reopened: stream.reopened(), resent: stream.resent(), recovery }
+        }));
+    }
+    while !started.load(Ordering::SeqCst) {
+        tokio::time::sleep(Duration::from_millis(10)).await;
+    }
+    let victim = servers[1].endpoint.clone();
+    *killed_at.lock().unwrap() = Some(Instant::now());
+    servers[1].kill();
+    let mut seen = Vec::new();
+    for robot in robots {
+        seen.push(robot.await.unwrap());
+    }
+    let mut per_replica: BTreeMap<&str, usize> = BTreeMap::new();
+    for robot in &seen {
+        *per_replica.entry(robot.first_endpoint.as_str()).or_default() += 1;
+    }
+    // Round-robin: the 50 streams opened spread over the 3 replicas.
+    assert_eq!(per_replica.len(), 3, "{per_replica:?}");
+    assert!(per_replica.values().all(|&n| (16..=17).contains(&n)), "{per_replica:?}");
+    for (i, robot) in seen.iter().enumerate() {
+        let on_victim = robot.first_endpoint == victim;
+        assert_eq!(robot.reopened, usize::from(on_victim), "robot {i} on {}", robot.first_endpoint);
+        assert_eq!(robot.recovery.is_some(), on_victim, "robot {i}");
+        assert!(robot.resent <= 1, "robot {i}: one tick in flight at a time, {} resent", robot.resent);
+    }
+    let slowest = seen.iter().filter_map(|r| r.recovery).max().expect("robots were on the killed replica");
+    let resent: usize = seen.iter().map(|r| r.resent).sum();
+    println!(
+        "{} robots moved off the killed replica, {resent} ticks resent; every robot served again within {slowest:?}",
+        per_replica[victim.as_str()]
+    );
+    assert!(slowest < RECOVERY, "a robot waited {slowest:?} after the kill");
+
+    // Unary calls skip the dead replica: every one succeeds.
+    for _ in 0..9 {
+        let speed = client.query_planner_control(model_ref("dubins4d", 0), Some(3.0)).await.unwrap();
+        assert!(speed.beta_query > 0.0);
+    }
+    let states = vec![0.1, 0.0, 1.5, 1.0];
+    let reply = client.tracking_control(model_ref("dubins4d", 0), states, vec![0.6], pb::OutOfDomainPolicy::Flag);
+    assert_eq!(reply.await.unwrap().controls.len(), 2);
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_client_connects_while_a_replica_is_down_and_a_dead_address_alone_is_an_error() {
+    let (servers, _) = replicas(1).await;
+    let dead = format!("http://127.0.0.1:{}", fastrack_e2e::free_port());
+    let address = format!("{dead},{}", servers[0].endpoint);
+    let client = FastrackClient::connect(&address, ClientOptions::default()).await.unwrap();
+    for _ in 0..4 {
+        client.get_model(model_ref("dubins4d", 0)).await.unwrap();
+    }
+    let mut stream = client.track(model_ref("dubins4d", 0), 0.0).await.unwrap();
+    assert_eq!(stream.endpoint(), servers[0].endpoint);
+    assert_eq!(stream.tick(robot_tick(0, 0)).await.unwrap().seq, 0);
+    let error = FastrackClient::connect(&dead, ClientOptions::default()).await.unwrap_err().to_string();
+    assert!(error.contains("cannot connect"), "{error}");
+    let error = FastrackClient::connect("http://a:1,,http://b:2", ClientOptions::default()).await.unwrap_err();
+    assert!(error.to_string().contains("empty endpoint"), "{error}");
+    // A host name stands for every address it resolves to.
+    let port = servers[0].endpoint.rsplit(':').next().unwrap();
+    let named = FastrackClient::connect(&format!("http://localhost:{port}"), ClientOptions::default()).await;
+    let named = named.unwrap();
+    assert!(named.endpoints().iter().all(|e| e.ends_with(&format!(":{port}"))), "{:?}", named.endpoints());
+}
