@@ -1,0 +1,155 @@
+//! Replicas benchmark: aggregate `Track` ticks/s of the load generator against 1, 2 and 3 release servers on
+//! this machine, one client spreading its streams round-robin over them (the replicas share the machine's
+//! cores, so the figure shows the overhead of replication rather than scale: per-replica efficiency is
+//! `ticks(n) / (n ticks(1))`); and the time from a replica's death (SIGKILL) until every robot that was on it
+//! is served again by another, over several trials. Prints tables and writes `bench/results/replicas.{json,md}`.
+//!
+//! Run: `cargo build --release --bins && cargo bench -p fastrack-e2e --bench replicas`.
+
+use fastrack_cli::load_generator::{run_load, LoadSpec, Workload};
+use fastrack_client::{model_ref, ClientOptions, FastrackClient};
+use fastrack_e2e::{robot_tick, TestServer};
+use fastrack_valuefn::record::{write_record, Table};
+use serde_json::json;
+use std::path::Path;
+use std::sync::{Arc, Mutex};
+use std::time::{Duration, Instant};
+
+const MODEL: &str = "dubins4d";
+const STREAMS: usize = 64;
+const DURATION: Duration = Duration::from_secs(3);
+const WARMUP: Duration = Duration::from_millis(500);
+/// Robots of each failover trial, each ticking every control period.
+const ROBOTS: u64 = 48;
+const CONTROL_PERIOD: Duration = Duration::from_millis(10);
+const TRIALS: usize = 5;
+const COMMAND: &str = "cargo build --release --bins && cargo bench -p fastrack-e2e --bench replicas";
+
+async fn start(count: usize) -> anyhow::Result<Vec<TestServer>> {
+    let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
+    let mut servers = Vec::with_capacity(count);
+    for _ in 0..count {
+        let (server, _) = TestServer::start_serving(&models).await;
+        servers.push(server);
+    }
+    Ok(servers)
+}
+
+fn address(servers: &[TestServer]) -> String {
+    servers.iter().map(|s| s.endpoint.as_str()).collect::<Vec<_>>().join(",")
+}
+
+/// Aggregate ticks/s of `STREAMS` closed-loop streams over `count` replicas.
+async fn throughput(count: usize) -> anyhow::Result<f64> {
+    let servers = start(count).await?;
+    let spec = LoadSpec {
+        model: model_ref(MODEL, 0),
+        workload: Workload::Track,
+        concurrency: STREAMS,
+        duration: DURATION,
+        warmup: WARMUP,
+        seed: 7,
+    };
+    let options = ClientOptions { request_timeout: Duration::from_secs(10), ..Default::default() };
+    let report = run_load(&address(&servers), &options, &spec, None).await?;
+    anyhow::ensure!(report.error_count() == 0, "{count} replicas: {} errors", report.error_count());
+    Ok(report.items_per_s())
+}
+
+/// One trial: `ROBOTS` robots tick every control period over 3 replicas; one replica is killed; returns how
+/// many robots were on it and, for each, the time from the kill to its next reply.
+async fn failover() -> anyhow::Result<(usize, Vec<Duration>)> {
+    let mut servers = start(3).await?;
+    let client = FastrackClient::connect(&address(&servers), ClientOptions::default()).await?;
+    let killed_at: Arc<Mutex<Option<Instant>>> = Arc::default();
+    let mut robots = Vec::new();
+    for robot in 0..ROBOTS {
+        let (client, killed_at) = (client.clone(), Arc::clone(&killed_at));
+        robots.push(tokio::spawn(async move {
+            let mut stream = client.track(model_ref(MODEL, 0), 0.0).await?;
+            let mut ticker = tokio::time::interval(CONTROL_PERIOD);
+            for seq in 0..300 {
+                ticker.tick().await;
+                let moved = stream.reopened();
+                let reply = stream.tick(robot_tick(seq, robot)).await?;
+                anyhow::ensure!(reply.seq == seq && reply.error.is_none(), "robot {robot} tick {seq}: {reply:?}");
+                if stream.reopened() > moved {
+                    let killed = killed_at.lock().map_err(|_| anyhow::anyhow!("poisoned"))?;
+                    return Ok(killed.map(|at| at.elapsed()));
+                }
+            }
+            Ok(None)
+        }));
+    }
+    tokio::time::sleep(Duration::from_millis(1000)).await;
+    *killed_at.lock().map_err(|_| anyhow::anyhow!("poisoned"))? = Some(Instant::now());
+    servers[0].kill();
+    let mut recoveries = Vec::new();
+    for robot in robots {
+        if let Some(recovery) = robot.await?? {
+            recoveries.push(recovery);
+        }
+    }
+    Ok((recoveries.len(), recoveries))
+}
+
+fn ms(d: Duration) -> f64 {
+    d.as_secs_f64() * 1e3
+}
+
+fn main() -> anyhow::Result<()> {
+    let binary = fastrack_e2e::server_binary();
+    let profile = binary.parent().and_then(Path::file_name).map_or("?".into(), |p| p.to_string_lossy().into_owned());
+    let rt = tokio::runtime::Builder::new_multi_thread().enable_all().build()?;
+    let mut rates = Vec::new();
+    for count in 1..=3 {
+        let rate = rt.block_on(throughput(count))?;
+        println!("{count} replica(s): {rate:.0} ticks/s");
+        rates.push(rate);
+    }
+    let mut table = Table::new(&["replicas", "ticks/s", "ticks/s per replica", "per-replica efficiency"]);
+    for (i, rate) in rates.iter().enumerate() {
+        let n = (i + 1) as f64;
+        table.row(vec![
+            (i + 1).to_string(),
+            format!("{rate:.0}"),
+            format!("{:.0}", rate / n),
+            format!("{:.3}", rate / (n * rates[0])),
+        ]);
+    }
+    let mut trials = Vec::new();
+    let mut failover_table =
+        Table::new(&["trial", "robots on the killed replica", "served again: median (ms)", "slowest (ms)"]);
+    for trial in 1..=TRIALS {
+        let (moved, mut recoveries) = rt.block_on(failover())?;
+        recoveries.sort();
+        let slowest = recoveries.last().copied().unwrap_or_default();
+        let median = recoveries.get(recoveries.len() / 2).copied().unwrap_or_default();
+        println!("trial {trial}: {moved} robots moved; median {:.1} ms, slowest {:.1} ms", ms(median), ms(slowest));
+        failover_table.row(vec![
+            trial.to_string(),
+            moved.to_string(),
+            format!("{:.1}", ms(median)),
+            format!("{:.1}", ms(slowest)),
+        ]);
+        trials.push(json!({"robots_moved": moved, "median_ms": ms(median), "slowest_ms": ms(slowest)}));
+    }
+    println!("\n{}\n{}", table.to_markdown(), failover_table.to_markdown());
+    let out = Path::new(env!("CARGO_MANIFEST_DIR")).join("../bench/results");
+    let path = write_record(
+        &out,
+        "replicas",
+        COMMAND,
+        json!({
+            "model": MODEL, "server": format!("target/{profile}/fastrack-server, defaults; every replica on this machine"),
+            "throughput": {"streams": STREAMS, "duration_s": DURATION.as_secs_f64(), "warmup_s": WARMUP.as_secs_f64(),
+                           "client": "fastrack_cli::load_generator, Track closed loop, one client of every replica"},
+            "failover": {"replicas": 3, "robots": ROBOTS, "control_period_ms": ms(CONTROL_PERIOD), "trials": TRIALS,
+                         "kill": "SIGKILL of one replica after 1 s"},
+        }),
+        json!({"ticks_per_s": rates, "failover": trials}),
+        &[("Aggregate Track ticks/s", &table), ("Failover: a replica killed under 48 robots", &failover_table)],
+    )?;
+    println!("wrote {}", path.display());
+    Ok(())
+}
