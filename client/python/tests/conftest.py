@@ -120,3 +120,15 @@ def auth_server() -> Iterator[Server]:
     process = Server("--tokens", f"user:{USER_TOKEN},admin:{ADMIN_TOKEN}").start().wait_serving()
     yield process
     process.close()
+
+
+@pytest.fixture
+def replicas() -> Iterator[list[Server]]:
+    """Three plain servers on free loopback ports, started together: replicas of one service (a test may
+    kill some, so each test gets its own)."""
+    servers = [Server().start() for _ in range(3)]
+    try:
+        yield [server.wait_serving() for server in servers]
+    finally:
+        for server in servers:
+            server.close()

@@ -5,6 +5,7 @@ from __future__ import annotations
 
 import asyncio
 import time
+from collections.abc import Callable
 from types import TracebackType
 from typing import TypeVar
 
@@ -17,16 +18,35 @@ from grpc_health.v1 import health_pb2
 from . import convert, results
 from .channel import DEFAULT_TIMEOUT_S, NO_RETRY, Retry, Settings, Tls
 from .client import HEALTH_CHECK
-from .errors import Unavailable, from_rpc_error
-from .track import AsyncTrackStream
+from .errors import FastrackError, Unavailable, from_rpc_error
+from .replicas import Rotation, all_unavailable
+from .track import AsyncTrackStream, AsyncTrackStub
 from .v1 import models_pb2, models_pb2_grpc, safety_pb2, safety_pb2_grpc
 
 Request = TypeVar("Request", bound=Message)
 Response = TypeVar("Response", bound=Message)
 
 
+class AsyncReplica:
+    """One server of an :class:`AsyncClient`: its endpoint, its channel and the stubs on it."""
+
+    def __init__(self, endpoint: str, channel: grpc.aio.Channel) -> None:
+        self.endpoint = endpoint
+        self.channel = channel
+        self.models = models_pb2_grpc.ModelServiceStub(channel)
+        self.admin = models_pb2_grpc.ModelAdminServiceStub(channel)
+        self.safety = safety_pb2_grpc.SafetyServiceStub(channel)
+        self.health: grpc.aio.UnaryUnaryMultiCallable[health_pb2.HealthCheckRequest, health_pb2.HealthCheckResponse]
+        self.health = channel.unary_unary(
+            HEALTH_CHECK,
+            request_serializer=health_pb2.HealthCheckRequest.SerializeToString,
+            response_deserializer=health_pb2.HealthCheckResponse.FromString,
+        )
+
+
 class AsyncClient:
-    """An asyncio connection to one fastrack server; arguments and methods as :class:`fastrack.Client`.
+    """An asyncio connection to a fastrack server or its replicas; arguments and methods as
+    :class:`fastrack.Client`.
 
     Use as ``async with AsyncClient("127.0.0.1:50051") as client``; many coroutines may share it (e.g. one
     ``async with client.track(...)`` per robot).
@@ -43,46 +63,56 @@ class AsyncClient:
         max_reconnect_backoff: float = 1.0,
     ) -> None:
         self.settings = Settings(address, timeout, token, tls, retry, max_reconnect_backoff)
-        self.channel: grpc.aio.Channel = self.settings.aio_channel()
-        self._models = models_pb2_grpc.ModelServiceStub(self.channel)
-        self._admin = models_pb2_grpc.ModelAdminServiceStub(self.channel)
-        self._safety = safety_pb2_grpc.SafetyServiceStub(self.channel)
-        self._health: grpc.aio.UnaryUnaryMultiCallable[health_pb2.HealthCheckRequest, health_pb2.HealthCheckResponse]
-        self._health = self.channel.unary_unary(
-            HEALTH_CHECK,
-            request_serializer=health_pb2.HealthCheckRequest.SerializeToString,
-            response_deserializer=health_pb2.HealthCheckResponse.FromString,
-        )
+        endpoints = self.settings.endpoints()
+        credentials = self.settings.credentials()
+        replicas = [AsyncReplica(e.target, self.settings.aio_channel(e, credentials)) for e in endpoints]
+        self._replicas = Rotation(replicas)
         self._dims: dict[tuple[str, int], convert.Dims] = {}
+
+    @property
+    def endpoints(self) -> list[str]:
+        """The replicas' endpoints (``host:port``), in round-robin order."""
+        return [replica.endpoint for replica in self._replicas.replicas]
+
+    @property
+    def channel(self) -> grpc.aio.Channel:
+        """The gRPC channel to the first replica (for stubs of one's own)."""
+        return self._replicas.replicas[0].channel
 
     async def _unary(
         self,
-        rpc: grpc.aio.UnaryUnaryMultiCallable[Request, Response],
+        rpc: Callable[[AsyncReplica], grpc.aio.UnaryUnaryMultiCallable[Request, Response]],
         request: Request,
         timeout: float | None,
-        retry: bool = True,
+        idempotent: bool = True,
     ) -> Response:
-        """One unary call with the token and deadline, retried on UNAVAILABLE if ``retry``."""
-        policy = self.settings.retry if retry else NO_RETRY
+        """One unary call with the token and deadline, over the replicas as :meth:`fastrack.Client._unary`."""
+        policy = self.settings.retry if idempotent else NO_RETRY
         deadline = self.settings.timeout if timeout is None else timeout
         for attempt in range(policy.attempts):
-            try:
-                return await rpc(request, timeout=deadline, metadata=self.settings.metadata)
-            except grpc.RpcError as e:
-                error = from_rpc_error(e)
-            if not isinstance(error, Unavailable) or attempt + 1 == policy.attempts:
-                raise error
+            failures: list[tuple[str, FastrackError]] = []
+            for replica in self._replicas.rotation() if idempotent else [self._replicas.next()]:
+                try:
+                    return await rpc(replica)(request, timeout=deadline, metadata=self.settings.metadata)
+                except grpc.RpcError as e:
+                    error = from_rpc_error(e)
+                if not isinstance(error, Unavailable):
+                    raise error
+                failures.append((replica.endpoint, error))
+            if attempt + 1 == policy.attempts:
+                raise all_unavailable(failures)
             await asyncio.sleep(policy.delay(attempt))
         raise AssertionError("unreachable: Retry.attempts >= 1")
 
     async def health(self, service: str = "", *, timeout: float | None = None) -> str:
-        """The server's health (``grpc.health.v1``): ``"SERVING"``, ``"NOT_SERVING"``, ..."""
+        """The health (``grpc.health.v1``) of the next replica: ``"SERVING"``, ``"NOT_SERVING"``, ..."""
         request = health_pb2.HealthCheckRequest(service=service)
-        reply = await self._unary(self._health, request, timeout, retry=False)
+        reply = await self._unary(lambda r: r.health, request, timeout, idempotent=False)
         return health_pb2.HealthCheckResponse.ServingStatus.Name(reply.status)
 
     async def wait_until_serving(self, timeout: float = 30.0) -> None:
-        """Polls health until the server is SERVING; raises :class:`Unavailable` after ``timeout`` seconds."""
+        """Polls health (the replicas in turn) until one is SERVING; raises :class:`Unavailable` after
+        ``timeout`` seconds."""
         end = time.monotonic() + timeout
         last = "no answer"
         while True:
@@ -98,12 +128,12 @@ class AsyncClient:
 
     async def list_models(self, *, timeout: float | None = None) -> list[models_pb2.ModelInfo]:
         """Every loaded model version, by name then version."""
-        return list((await self._unary(self._models.ListModels, models_pb2.ListModelsRequest(), timeout)).models)
+        return list((await self._unary(lambda r: r.models.ListModels, models_pb2.ListModelsRequest(), timeout)).models)
 
     async def get_model(self, model: str, version: int = 0, *, timeout: float | None = None) -> models_pb2.ModelInfo:
         """One model version's description: state, parameters, controls (with units and bounds), TEB table."""
         request = models_pb2.GetModelRequest(model=convert.model_ref(model, version))
-        info = (await self._unary(self._models.GetModel, request, timeout)).model
+        info = (await self._unary(lambda r: r.models.GetModel, request, timeout)).model
         self._dims[(model, version)] = convert.Dims.of(info)
         return info
 
@@ -122,7 +152,7 @@ class AsyncClient:
         request = safety_pb2.QueryPlannerControlRequest(model=convert.model_ref(model, version))
         if d_obs is not None:
             request.d_obs = float(d_obs)
-        return convert.planner_control(await self._unary(self._safety.QueryPlannerControl, request, timeout))
+        return convert.planner_control(await self._unary(lambda r: r.safety.QueryPlannerControl, request, timeout))
 
     async def tracking_error_bound(
         self,
@@ -137,7 +167,8 @@ class AsyncClient:
         request = safety_pb2.GetTrackingErrorBoundRequest(
             model=convert.model_ref(model, version), beta=beta, boundary_points=boundary_points
         )
-        return convert.tracking_error_bound(await self._unary(self._safety.GetTrackingErrorBound, request, timeout))
+        reply = await self._unary(lambda r: r.safety.GetTrackingErrorBound, request, timeout)
+        return convert.tracking_error_bound(reply)
 
     async def evaluate(
         self,
@@ -155,7 +186,7 @@ class AsyncClient:
         request = safety_pb2.EvaluateValueRequest(
             model=convert.model_ref(model, version), states=s, params=p, out_of_domain=convert.policy(out_of_domain)
         )
-        return convert.evaluation(await self._unary(self._safety.EvaluateValue, request, timeout), dims, n)
+        return convert.evaluation(await self._unary(lambda r: r.safety.EvaluateValue, request, timeout), dims, n)
 
     async def tracking_control(
         self,
@@ -173,36 +204,45 @@ class AsyncClient:
         request = safety_pb2.TrackingControlRequest(
             model=convert.model_ref(model, version), states=s, params=p, out_of_domain=convert.policy(out_of_domain)
         )
-        return convert.tracking_control(await self._unary(self._safety.TrackingControl, request, timeout), dims, n)
+        reply = await self._unary(lambda r: r.safety.TrackingControl, request, timeout)
+        return convert.tracking_control(reply, dims, n)
 
     def track(self, model: str, *, version: int = 0, idle_timeout: float = 0.0) -> _TrackOpener:
         """A ``Track`` stream for one robot: ``async with client.track("dubins4d") as robot``."""
         return _TrackOpener(self, model, version, idle_timeout)
 
     async def open_track(self, model: str, *, version: int = 0, idle_timeout: float = 0.0) -> AsyncTrackStream:
-        """Opens a ``Track`` stream (close it with ``await stream.close()``); :meth:`track` does both."""
+        """Opens a ``Track`` stream on the next replica that takes it (close it with ``await
+        stream.close()``); :meth:`track` does both."""
         dims = await self.dims(model, version)
-        call = self._safety.Track(metadata=self.settings.metadata)
-        return await AsyncTrackStream(call, dims, convert.open_stream(model, version, idle_timeout)).open()
+        open_request = convert.open_stream(model, version, idle_timeout)
+        return await AsyncTrackStream(self._track_stubs, self.settings.metadata, dims, open_request).open()
+
+    def _track_stubs(self) -> list[tuple[str, AsyncTrackStub]]:
+        return [(replica.endpoint, replica.safety.Track) for replica in self._replicas.rotation()]
 
     async def load_model(self, name: str, version: int = 0, *, timeout: float | None = None) -> list[int]:
-        """Admin: loads a model (version 0: every version); the loaded versions."""
+        """Admin, on the next replica only: loads a model (version 0: every version); the loaded versions."""
         request = models_pb2.LoadModelRequest(name=name, version=version)
-        return list((await self._unary(self._admin.LoadModel, request, timeout, retry=False)).loaded_versions)
+        reply = await self._unary(lambda r: r.admin.LoadModel, request, timeout, idempotent=False)
+        return list(reply.loaded_versions)
 
     async def unload_model(self, name: str, version: int = 0, *, timeout: float | None = None) -> list[int]:
         """Admin: stops serving a model (version 0: every version); the unloaded versions."""
         request = models_pb2.UnloadModelRequest(name=name, version=version)
-        return list((await self._unary(self._admin.UnloadModel, request, timeout, retry=False)).unloaded_versions)
+        reply = await self._unary(lambda r: r.admin.UnloadModel, request, timeout, idempotent=False)
+        return list(reply.unloaded_versions)
 
     async def reload_model(self, name: str = "", *, timeout: float | None = None) -> list[models_pb2.ReloadOutcome]:
         """Admin: re-reads a model (empty name: the whole repository) from disk."""
         request = models_pb2.ReloadModelRequest(name=name)
-        return list((await self._unary(self._admin.ReloadModel, request, timeout, retry=False)).outcomes)
+        reply = await self._unary(lambda r: r.admin.ReloadModel, request, timeout, idempotent=False)
+        return list(reply.outcomes)
 
     async def close(self) -> None:
-        """Closes the connection (open streams end)."""
-        await self.channel.close()
+        """Closes the connections (open streams end)."""
+        for replica in self._replicas.replicas:
+            await replica.channel.close()
 
     async def __aenter__(self) -> AsyncClient:
         return self

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from collections.abc import Callable
 from types import TracebackType
 from typing import TypeVar
 
@@ -13,8 +14,9 @@ from grpc_health.v1 import health_pb2
 
 from . import convert, results
 from .channel import DEFAULT_TIMEOUT_S, NO_RETRY, Retry, Settings, Tls
-from .errors import Unavailable, from_rpc_error
-from .track import TrackStream
+from .errors import FastrackError, Unavailable, from_rpc_error
+from .replicas import Rotation, all_unavailable
+from .track import SyncTrackStub, TrackStream
 from .v1 import models_pb2, models_pb2_grpc, safety_pb2, safety_pb2_grpc
 
 Request = TypeVar("Request", bound=Message)
@@ -23,13 +25,33 @@ Response = TypeVar("Response", bound=Message)
 HEALTH_CHECK = "/grpc.health.v1.Health/Check"
 
 
-class Client:
-    """A connection to one fastrack server (``fastrack.v1`` over gRPC); thread-safe, cheap to share.
+class Replica:
+    """One server of a :class:`Client`: its endpoint, its channel and the stubs on it."""
 
-    ``address`` is ``host:port`` (or ``http://host:port``; ``https://host:port`` with ``tls``). ``timeout``
-    is the default deadline of unary calls in seconds (each method takes its own ``timeout`` too);
-    ``token`` is sent as ``authorization: Bearer <token>``; ``retry`` says how idempotent unary calls are
-    retried on ``UNAVAILABLE`` (never ``Track`` nor the admin calls). Use as a context manager, or call
+    def __init__(self, endpoint: str, channel: grpc.Channel) -> None:
+        self.endpoint = endpoint
+        self.channel = channel
+        self.models = models_pb2_grpc.ModelServiceStub(channel)
+        self.admin = models_pb2_grpc.ModelAdminServiceStub(channel)
+        self.safety = safety_pb2_grpc.SafetyServiceStub(channel)
+        self.health: grpc.UnaryUnaryMultiCallable[health_pb2.HealthCheckRequest, health_pb2.HealthCheckResponse]
+        self.health = channel.unary_unary(
+            HEALTH_CHECK,
+            request_serializer=health_pb2.HealthCheckRequest.SerializeToString,
+            response_deserializer=health_pb2.HealthCheckResponse.FromString,
+        )
+
+
+class Client:
+    """A connection to a fastrack server, or to its replicas (``fastrack.v1`` over gRPC); thread-safe, cheap
+    to share.
+
+    ``address`` is ``host:port`` (or ``http://host:port``; ``https://host:port`` with ``tls``), several of
+    them separated by commas, or a host name resolving to several addresses (e.g. a Kubernetes headless
+    Service): each address is a replica, and calls go round-robin over them (see :mod:`fastrack.replicas`).
+    ``timeout`` is the default deadline of unary calls in seconds (each method takes its own ``timeout``
+    too); ``token`` is sent as ``authorization: Bearer <token>``; ``retry`` says how idempotent unary calls
+    are retried on ``UNAVAILABLE`` (never ``Track`` nor the admin calls). Use as a context manager, or call
     :meth:`close`. Models are named by ``model`` (e.g. ``"dubins4d"``) and ``version`` (0: the server's
     default version).
     """
@@ -45,47 +67,57 @@ class Client:
         max_reconnect_backoff: float = 1.0,
     ) -> None:
         self.settings = Settings(address, timeout, token, tls, retry, max_reconnect_backoff)
-        self.channel: grpc.Channel = self.settings.sync_channel()
-        self._models = models_pb2_grpc.ModelServiceStub(self.channel)
-        self._admin = models_pb2_grpc.ModelAdminServiceStub(self.channel)
-        self._safety = safety_pb2_grpc.SafetyServiceStub(self.channel)
-        self._health: grpc.UnaryUnaryMultiCallable[health_pb2.HealthCheckRequest, health_pb2.HealthCheckResponse] = (
-            self.channel.unary_unary(
-                HEALTH_CHECK,
-                request_serializer=health_pb2.HealthCheckRequest.SerializeToString,
-                response_deserializer=health_pb2.HealthCheckResponse.FromString,
-            )
-        )
+        endpoints = self.settings.endpoints()
+        credentials = self.settings.credentials()
+        self._replicas = Rotation([Replica(e.target, self.settings.sync_channel(e, credentials)) for e in endpoints])
         self._dims: dict[tuple[str, int], convert.Dims] = {}
+
+    @property
+    def endpoints(self) -> list[str]:
+        """The replicas' endpoints (``host:port``), in round-robin order."""
+        return [replica.endpoint for replica in self._replicas.replicas]
+
+    @property
+    def channel(self) -> grpc.Channel:
+        """The gRPC channel to the first replica (for stubs of one's own)."""
+        return self._replicas.replicas[0].channel
 
     def _unary(
         self,
-        rpc: grpc.UnaryUnaryMultiCallable[Request, Response],
+        rpc: Callable[[Replica], grpc.UnaryUnaryMultiCallable[Request, Response]],
         request: Request,
         timeout: float | None,
-        retry: bool = True,
+        idempotent: bool = True,
     ) -> Response:
-        """One unary call with the token and deadline, retried on UNAVAILABLE if ``retry``."""
-        policy = self.settings.retry if retry else NO_RETRY
+        """One unary call with the token and deadline. ``idempotent``: on the next replica, then on the
+        following ones while they answer UNAVAILABLE, the whole pass repeated with backoff as the retry
+        policy says; otherwise on the next replica only, once."""
+        policy = self.settings.retry if idempotent else NO_RETRY
         deadline = self.settings.timeout if timeout is None else timeout
         for attempt in range(policy.attempts):
-            try:
-                return rpc(request, timeout=deadline, metadata=self.settings.metadata)
-            except grpc.RpcError as e:
-                error = from_rpc_error(e)
-            if not isinstance(error, Unavailable) or attempt + 1 == policy.attempts:
-                raise error
+            failures: list[tuple[str, FastrackError]] = []
+            for replica in self._replicas.rotation() if idempotent else [self._replicas.next()]:
+                try:
+                    return rpc(replica)(request, timeout=deadline, metadata=self.settings.metadata)
+                except grpc.RpcError as e:
+                    error = from_rpc_error(e)
+                if not isinstance(error, Unavailable):
+                    raise error
+                failures.append((replica.endpoint, error))
+            if attempt + 1 == policy.attempts:
+                raise all_unavailable(failures)
             time.sleep(policy.delay(attempt))
         raise AssertionError("unreachable: Retry.attempts >= 1")
 
     def health(self, service: str = "", *, timeout: float | None = None) -> str:
-        """The server's health (``grpc.health.v1``): ``"SERVING"``, ``"NOT_SERVING"``, ..."""
+        """The health (``grpc.health.v1``) of the next replica: ``"SERVING"``, ``"NOT_SERVING"``, ..."""
         request = health_pb2.HealthCheckRequest(service=service)
-        reply = self._unary(self._health, request, timeout, retry=False)
+        reply = self._unary(lambda r: r.health, request, timeout, idempotent=False)
         return health_pb2.HealthCheckResponse.ServingStatus.Name(reply.status)
 
     def wait_until_serving(self, timeout: float = 30.0) -> None:
-        """Polls health until the server is SERVING; raises :class:`Unavailable` after ``timeout`` seconds."""
+        """Polls health (the replicas in turn) until one is SERVING; raises :class:`Unavailable` after
+        ``timeout`` seconds."""
         end = time.monotonic() + timeout
         last = "no answer"
         while True:
@@ -101,12 +133,12 @@ class Client:
 
     def list_models(self, *, timeout: float | None = None) -> list[models_pb2.ModelInfo]:
         """Every loaded model version, by name then version."""
-        return list(self._unary(self._models.ListModels, models_pb2.ListModelsRequest(), timeout).models)
+        return list(self._unary(lambda r: r.models.ListModels, models_pb2.ListModelsRequest(), timeout).models)
 
     def get_model(self, model: str, version: int = 0, *, timeout: float | None = None) -> models_pb2.ModelInfo:
         """One model version's description: state, parameters, controls (with units and bounds), TEB table."""
         request = models_pb2.GetModelRequest(model=convert.model_ref(model, version))
-        info = self._unary(self._models.GetModel, request, timeout).model
+        info = self._unary(lambda r: r.models.GetModel, request, timeout).model
         self._dims[(model, version)] = convert.Dims.of(info)
         return info
 
@@ -129,7 +161,7 @@ class Client:
         request = safety_pb2.QueryPlannerControlRequest(model=convert.model_ref(model, version))
         if d_obs is not None:
             request.d_obs = float(d_obs)
-        return convert.planner_control(self._unary(self._safety.QueryPlannerControl, request, timeout))
+        return convert.planner_control(self._unary(lambda r: r.safety.QueryPlannerControl, request, timeout))
 
     def tracking_error_bound(
         self,
@@ -145,7 +177,7 @@ class Client:
         request = safety_pb2.GetTrackingErrorBoundRequest(
             model=convert.model_ref(model, version), beta=beta, boundary_points=boundary_points
         )
-        return convert.tracking_error_bound(self._unary(self._safety.GetTrackingErrorBound, request, timeout))
+        return convert.tracking_error_bound(self._unary(lambda r: r.safety.GetTrackingErrorBound, request, timeout))
 
     def evaluate(
         self,
@@ -168,7 +200,7 @@ class Client:
         request = safety_pb2.EvaluateValueRequest(
             model=convert.model_ref(model, version), states=s, params=p, out_of_domain=convert.policy(out_of_domain)
         )
-        return convert.evaluation(self._unary(self._safety.EvaluateValue, request, timeout), dims, n)
+        return convert.evaluation(self._unary(lambda r: r.safety.EvaluateValue, request, timeout), dims, n)
 
     def tracking_control(
         self,
@@ -186,34 +218,40 @@ class Client:
         request = safety_pb2.TrackingControlRequest(
             model=convert.model_ref(model, version), states=s, params=p, out_of_domain=convert.policy(out_of_domain)
         )
-        return convert.tracking_control(self._unary(self._safety.TrackingControl, request, timeout), dims, n)
+        return convert.tracking_control(self._unary(lambda r: r.safety.TrackingControl, request, timeout), dims, n)
 
     def track(self, model: str, *, version: int = 0, idle_timeout: float = 0.0) -> TrackStream:
-        """Opens a ``Track`` stream for one robot (no deadline; the server closes it after ``idle_timeout``
-        seconds without a tick, 0: the server's default). Use as ``with client.track("dubins4d") as robot``."""
+        """Opens a ``Track`` stream for one robot on the next replica that takes it (no deadline; the server
+        closes it after ``idle_timeout`` seconds without a tick, 0: the server's default). Use as ``with
+        client.track("dubins4d") as robot``. The stream moves to another replica when its own goes away
+        (see :mod:`fastrack.track`)."""
         dims = self.dims(model, version)
-        return TrackStream(
-            self._safety.Track, self.settings.metadata, dims, convert.open_stream(model, version, idle_timeout)
-        )
+        open_request = convert.open_stream(model, version, idle_timeout)
+        return TrackStream(self._track_stubs, self.settings.metadata, dims, open_request)
+
+    def _track_stubs(self) -> list[tuple[str, SyncTrackStub]]:
+        return [(replica.endpoint, replica.safety.Track) for replica in self._replicas.rotation()]
 
     def load_model(self, name: str, version: int = 0, *, timeout: float | None = None) -> list[int]:
-        """Admin: loads a model from the server's repository (version 0: every version); the loaded versions."""
+        """Admin, on the next replica only: loads a model from its repository (version 0: every version); the
+        loaded versions."""
         request = models_pb2.LoadModelRequest(name=name, version=version)
-        return list(self._unary(self._admin.LoadModel, request, timeout, retry=False).loaded_versions)
+        return list(self._unary(lambda r: r.admin.LoadModel, request, timeout, idempotent=False).loaded_versions)
 
     def unload_model(self, name: str, version: int = 0, *, timeout: float | None = None) -> list[int]:
         """Admin: stops serving a model (version 0: every version); the unloaded versions."""
         request = models_pb2.UnloadModelRequest(name=name, version=version)
-        return list(self._unary(self._admin.UnloadModel, request, timeout, retry=False).unloaded_versions)
+        return list(self._unary(lambda r: r.admin.UnloadModel, request, timeout, idempotent=False).unloaded_versions)
 
     def reload_model(self, name: str = "", *, timeout: float | None = None) -> list[models_pb2.ReloadOutcome]:
         """Admin: re-reads a model (empty name: the whole repository) from disk; one outcome per version."""
         request = models_pb2.ReloadModelRequest(name=name)
-        return list(self._unary(self._admin.ReloadModel, request, timeout, retry=False).outcomes)
+        return list(self._unary(lambda r: r.admin.ReloadModel, request, timeout, idempotent=False).outcomes)
 
     def close(self) -> None:
-        """Closes the connection (open streams end)."""
-        self.channel.close()
+        """Closes the connections (open streams end)."""
+        for replica in self._replicas.replicas:
+            replica.channel.close()
 
     def __enter__(self) -> Client:
         return self

@@ -116,8 +116,16 @@ def from_status(code: grpc.StatusCode | int, message: str) -> FastrackError:
     return _BY_CODE.get(status, FastrackError)(message, status)
 
 
+# What the server's gRPC stack (tonic) answers when a call's deadline passes on the server first.
+SERVER_TIMEOUT = "Timeout expired"
+
+
 def from_rpc_error(error: grpc.RpcError) -> FastrackError:
     """The exception for a failed call (sync ``grpc.RpcError`` or ``grpc.aio.AioRpcError``)."""
     code = error.code() if isinstance(error, (grpc.Call, grpc.aio.AioRpcError)) else None
     details = error.details() if isinstance(error, (grpc.Call, grpc.aio.AioRpcError)) else None
+    if code == grpc.StatusCode.CANCELLED and details == SERVER_TIMEOUT:
+        # The server's gRPC stack ends a call whose deadline passed with CANCELLED "Timeout expired" when its
+        # own timer fires before the client's: the deadline expired either way.
+        code = grpc.StatusCode.DEADLINE_EXCEEDED
     return from_status(code or grpc.StatusCode.UNKNOWN, details or str(error))

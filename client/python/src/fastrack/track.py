@@ -1,9 +1,26 @@
-"""``Track`` streams: one bidirectional stream per robot, one tick per control step, replies in order.
+"""``Track`` streams: one bidirectional stream per robot, one tick per control step, replies in order, and
+failover to another replica when the stream's own goes away.
 
 The stream object numbers the ticks (``seq`` 0, 1, 2, ...) and checks that every reply answers the oldest
 tick still waiting. ``tick`` sends and waits; ``send`` and ``recv`` pipeline. A tick the server rejects
-(``TrackReply.error``) raises its exception and the stream stays open; a stream the server ends (idle
-timeout, shutdown) raises on the next ``tick`` or ``recv``.
+(``TrackReply.error``) raises its exception and the stream stays open; a stream the server ends for a reason
+of its own (idle timeout) raises on the next ``tick`` or ``recv``.
+
+The stream remembers the ticks it sent that are not answered yet. When its replica goes away (the stream
+ends with ``UNAVAILABLE``, as a draining server's do with "the server is shutting down; reconnect to
+continue"; its connection breaks, as a killed server's does; or it closes with ticks unanswered), it reopens
+on the client's next replica (each other replica tried once, the lost one last), sends its ``open`` message
+and the unanswered ticks again, and carries on: the robot sees every tick answered exactly once, in order.
+A replica lost while no tick was waiting is noticed at the next ``send``, which reopens first.
+``endpoint`` is the replica serving the stream now, ``reopened`` how often it moved and ``resent`` how many
+ticks were sent again. When no replica takes the stream, :class:`~fastrack.Unavailable` says what ended it;
+the ticks still waiting are dropped, and the next ``send`` tries the replicas again.
+
+Nothing else needs carrying over: the server keeps no per-stream state a robot cannot resend, except
+``beta_old`` (the previous tick's speed bound), which starts again at ``beta_u`` (the model's largest
+speed bound) on the new replica; the first reply there shows it in its ``beta_old``.
+
+A stream is used by one thread (or task) at a time: ``send`` and ``recv`` may both move it.
 """
 
 from __future__ import annotations
@@ -11,45 +28,87 @@ from __future__ import annotations
 import asyncio
 import queue
 from collections import deque
+from collections.abc import Callable
 from types import TracebackType
+from typing import TypeAlias, TypeVar
 
 import grpc
 import grpc.aio
 import numpy.typing as npt
 
 from . import convert
-from .errors import FastrackError, Internal, Unavailable, from_rpc_error
+from .errors import FastrackError, Internal, Unavailable, from_rpc_error, from_status
+from .replicas import all_unavailable, replica_lost
 from .results import TrackReply
 from .v1 import safety_pb2
 
 TrackCall = grpc.aio.StreamStreamCall[safety_pb2.TrackRequest, safety_pb2.TrackResponse]
+SyncTrackStub: TypeAlias = "grpc.StreamStreamMultiCallable[safety_pb2.TrackRequest, safety_pb2.TrackResponse]"
+AsyncTrackStub: TypeAlias = "grpc.aio.StreamStreamMultiCallable[safety_pb2.TrackRequest, safety_pb2.TrackResponse]"
+SyncReplicas: TypeAlias = "Callable[[], list[tuple[str, SyncTrackStub]]]"
+"""The replicas to open a stream on, in the order to try them: ``(endpoint, Track stub)`` pairs."""
+AsyncReplicas: TypeAlias = "Callable[[], list[tuple[str, AsyncTrackStub]]]"
+Stub = TypeVar("Stub")
 
 
 class _Sequence:
-    """Numbers ticks and matches replies to them, in order."""
+    """Numbers ticks, remembers those not answered yet, and matches replies to them in order."""
 
     def __init__(self) -> None:
         self.next_seq = 0
-        self.pending: deque[int] = deque()
+        self.pending: deque[tuple[int, safety_pb2.TrackRequest]] = deque()
 
-    def sent(self) -> int:
+    def add(self, request: safety_pb2.TrackRequest) -> int:
         seq = self.next_seq
-        self.pending.append(seq)
+        self.pending.append((seq, request))
         self.next_seq += 1
         return seq
 
-    def expect(self) -> int:
+    def withdraw(self) -> None:
+        """Forgets the newest tick: it could not be sent."""
+        self.pending.pop()
+        self.next_seq -= 1
+
+    def requests(self) -> list[safety_pb2.TrackRequest]:
+        return [request for _, request in self.pending]
+
+    def check_waiting(self) -> None:
         if not self.pending:
             raise FastrackError("recv() without a tick awaiting its reply: send() first")
-        return self.pending.popleft()
 
-    @staticmethod
-    def answer(expected: int, response: object) -> TrackReply:
-        if not isinstance(response, safety_pb2.TrackResponse):
-            raise Unavailable("the server closed the Track stream")
+    def answer(self, response: safety_pb2.TrackResponse) -> TrackReply:
+        expected, _ = self.pending.popleft()
         if response.reply.seq != expected:
             raise Internal(f"the reply to tick {response.reply.seq} arrived while tick {expected} was due")
         return convert.track_reply(response.reply)
+
+
+def _order(replicas: list[tuple[str, Stub]], lost: str | None) -> list[tuple[str, Stub]]:
+    """The replicas to try, the one just lost last (it may be back, but the others are likelier to answer)."""
+    return [r for r in replicas if r[0] != lost] + [r for r in replicas if r[0] == lost]
+
+
+def _movable(error: FastrackError) -> bool:
+    """True when the stream may go on elsewhere: its replica is gone, or it closed without being asked to
+    (a status OK before the robot closed it)."""
+    return replica_lost(error) or error.code == grpc.StatusCode.OK
+
+
+def _no_replica(why: str, detail: str) -> Unavailable:
+    return Unavailable(f"{why}; no replica took the stream again ({detail})")
+
+
+def _refused(why: str, failures: list[tuple[str, FastrackError]], raise_as_is: bool) -> FastrackError:
+    """The error of an open that every replica refused as gone (``failures``): as a unary call's at the
+    first open (``raise_as_is``), else saying ``why`` the stream had to move."""
+    if raise_as_is:
+        return all_unavailable(failures) if failures else Unavailable("no replica to open a Track stream on")
+    detail = "; ".join(f"{where}: {e.code.name}: {e.message}" for where, e in failures)
+    return _no_replica(why, detail or "no replica to open it on")
+
+
+def _why(error: FastrackError) -> str:
+    return f"the stream's replica went away ({error.code.name}: {error.message})"
 
 
 class TrackStream:
@@ -57,17 +116,82 @@ class TrackStream:
 
     def __init__(
         self,
-        stub: grpc.StreamStreamMultiCallable[safety_pb2.TrackRequest, safety_pb2.TrackResponse],
+        replicas: SyncReplicas,
         metadata: tuple[tuple[str, str], ...],
         dims: convert.Dims,
         open_request: safety_pb2.TrackRequest,
     ) -> None:
+        self._replicas = replicas
+        self._metadata = metadata
         self._dims = dims
-        self._requests: queue.SimpleQueue[safety_pb2.TrackRequest | None] = queue.SimpleQueue()
-        self._requests.put(open_request)
+        self._open_request = open_request
         self._sequence = _Sequence()
         self._closed = False
-        self._call = stub(iter(self._requests.get, None), metadata=metadata)
+        self._lost = False
+        self._replica_count = 1
+        self.reopened = 0
+        """How often the stream moved to another replica."""
+        self.resent = 0
+        """Ticks sent again after a move, because their first replica never answered them."""
+        self.endpoint = ""
+        """The replica serving the stream now."""
+        self._requests: queue.SimpleQueue[safety_pb2.TrackRequest | None] = queue.SimpleQueue()
+        self._call: grpc._CallIterator[safety_pb2.TrackResponse] | None = None
+        self._open_somewhere(None, raise_as_is=True)
+
+    def _open_somewhere(self, lost: str | None, raise_as_is: bool = False, why: str = "") -> None:
+        """Opens on the first replica that takes the stream (each tried once, ``lost`` last) and sends the
+        unanswered ticks there. Raises the error of a replica that refuses the stream (``raise_as_is``) or
+        :class:`Unavailable` saying ``why`` the stream had to move."""
+        failures: list[tuple[str, FastrackError]] = []
+        candidates = self._replicas()
+        self._replica_count = len(candidates)
+        for endpoint, stub in _order(candidates, lost):
+            requests: queue.SimpleQueue[safety_pb2.TrackRequest | None] = queue.SimpleQueue()
+            requests.put(self._open_request)
+            call = stub(iter(requests.get, None), metadata=self._metadata)
+            call.initial_metadata()  # the server answers the open with its headers, or ends the call
+            if not call.is_active():
+                requests.put(None)  # ends the thread feeding the call
+                error = from_status(call.code(), call.details() or "the Track stream ended at once")
+                if not _movable(error):
+                    raise error if raise_as_is else _no_replica(why, f"{endpoint}: {error.code.name}: {error.message}")
+                failures.append((endpoint, error))
+                continue
+            resend = self._sequence.requests()
+            for request in resend:
+                requests.put(request)
+            self._requests, self._call, self.endpoint, self._lost = requests, call, endpoint, False
+            if lost is not None:
+                self.reopened += 1
+                self.resent += len(resend)
+            return
+        raise _refused(why, failures, raise_as_is)
+
+    def _reopen(self, why: str) -> None:
+        """Moves the stream to another replica after ``why`` ended it; on failure drops the waiting ticks."""
+        self._abandon()
+        try:
+            self._open_somewhere(self.endpoint, why=why)
+        except FastrackError:
+            self._give_up()
+            raise
+
+    def _give_up(self) -> None:
+        """No replica took the stream: the ticks waiting are dropped, the next send tries again."""
+        self._lost = True
+        self._sequence.pending.clear()
+
+    def _abandon(self) -> None:
+        self._requests.put(None)
+        if self._call is not None:
+            self._call.cancel()
+
+    def _ended(self) -> FastrackError | None:
+        """The stream's status if it has ended (without blocking), else None."""
+        if self._call is None or self._call.is_active():
+            return None
+        return from_status(self._call.code(), self._call.details() or "the Track stream ended")
 
     def send(self, tracker_state: npt.ArrayLike, planner_state: npt.ArrayLike, d_obs: float | None = None) -> int:
         """Sends one tick without waiting for its reply; returns its ``seq``.
@@ -79,19 +203,39 @@ class TrackStream:
         if self._closed:
             raise Unavailable("the Track stream is closed")
         request = convert.tick(self._dims, self._sequence.next_seq, tracker_state, planner_state, d_obs)
+        ended = self._ended()
+        if self._lost:
+            self._reopen("the stream's replica went away earlier")
+        elif ended is not None and _movable(ended):
+            self._reopen(_why(ended))
+        seq = self._sequence.add(request)
         self._requests.put(request)
-        return self._sequence.sent()
+        return seq
 
     def recv(self) -> TrackReply:
         """The reply to the oldest tick still waiting (raises the tick's error, or the stream's)."""
-        expected = self._sequence.expect()
-        try:
-            response: object = next(self._call)
-        except StopIteration:
-            response = None
-        except grpc.RpcError as e:
-            raise from_rpc_error(e) from None
-        return self._sequence.answer(expected, response)
+        self._sequence.check_waiting()
+        moves = 0
+        while True:
+            assert self._call is not None
+            try:
+                response = next(self._call)
+            except StopIteration:
+                why = "the server closed the stream with ticks unanswered"
+            except grpc.RpcError as e:
+                error = from_rpc_error(e)
+                if not _movable(error):
+                    self._sequence.pending.popleft()
+                    raise error from None
+                why = _why(error)
+            else:
+                return self._sequence.answer(response)
+            moves += 1
+            if moves > self._replica_count:  # every replica took the stream and lost it without answering
+                self._abandon()
+                self._give_up()
+                raise _no_replica(why, "every replica took it and lost it again without answering")
+            self._reopen(why)
 
     def tick(self, tracker_state: npt.ArrayLike, planner_state: npt.ArrayLike, d_obs: float | None = None) -> TrackReply:
         """Sends one tick and waits for its reply (see :meth:`send` for the arguments)."""
@@ -105,7 +249,9 @@ class TrackStream:
             return
         self._closed = True
         self._requests.put(None)
-        if cancel:
+        if self._call is None:
+            return
+        if cancel or self._lost:
             self._call.cancel()
             return
         try:
@@ -124,40 +270,149 @@ class TrackStream:
 class AsyncTrackStream:
     """An asyncio ``Track`` stream; use with ``async with client.track("dubins4d") as robot``."""
 
-    def __init__(self, call: TrackCall, dims: convert.Dims, open_request: safety_pb2.TrackRequest) -> None:
-        self._call = call
+    def __init__(
+        self,
+        replicas: AsyncReplicas,
+        metadata: tuple[tuple[str, str], ...],
+        dims: convert.Dims,
+        open_request: safety_pb2.TrackRequest,
+    ) -> None:
+        self._replicas = replicas
+        self._metadata = metadata
         self._dims = dims
         self._open_request = open_request
         self._sequence = _Sequence()
+        self._lost = False
+        self._replica_count = 1
+        self._call: TrackCall | None = None
+        self.reopened = 0
+        """How often the stream moved to another replica."""
+        self.resent = 0
+        """Ticks sent again after a move, because their first replica never answered them."""
+        self.endpoint = ""
+        """The replica serving the stream now."""
 
-    async def _write(self, request: safety_pb2.TrackRequest) -> None:
+    @staticmethod
+    async def _status(call: TrackCall, fallback: FastrackError | None = None) -> FastrackError:
+        """The ended call's status as an exception (``fallback`` if it has not ended)."""
+        if not call.done() and fallback is not None:
+            return fallback
+        return from_status(await call.code(), await call.details() or "the Track stream ended")
+
+    async def _open_somewhere(self, lost: str | None, raise_as_is: bool = False, why: str = "") -> None:
+        """As :meth:`TrackStream._open_somewhere`."""
+        failures: list[tuple[str, FastrackError]] = []
+        candidates = self._replicas()
+        self._replica_count = len(candidates)
+        for endpoint, stub in _order(candidates, lost):
+            call = stub(metadata=self._metadata)
+            resend = self._sequence.requests()
+            try:
+                await call.write(self._open_request)
+                await call.initial_metadata()  # the server answers the open with its headers, or ends the call
+                if not call.done():
+                    for request in resend:
+                        await call.write(request)
+            except grpc.RpcError as e:
+                error: FastrackError | None = from_rpc_error(e)
+            except asyncio.InvalidStateError:
+                error = None
+            else:
+                error = None
+            if call.done():
+                error = await self._status(call, error)
+            if error is None:
+                self._call, self.endpoint, self._lost = call, endpoint, False
+                if lost is not None:
+                    self.reopened += 1
+                    self.resent += len(resend)
+                return
+            call.cancel()
+            if not _movable(error):
+                raise error if raise_as_is else _no_replica(why, f"{endpoint}: {error.code.name}: {error.message}")
+            failures.append((endpoint, error))
+        raise _refused(why, failures, raise_as_is)
+
+    async def _reopen(self, why: str) -> None:
+        if self._call is not None:
+            self._call.cancel()
         try:
-            await self._call.write(request)
-        except grpc.RpcError as e:
-            raise from_rpc_error(e) from None
-        except asyncio.InvalidStateError:
-            raise Unavailable("the Track stream is closed") from None
+            await self._open_somewhere(self.endpoint, why=why)
+        except FastrackError:
+            self._give_up()
+            raise
+
+    def _give_up(self) -> None:
+        """No replica took the stream: the ticks waiting are dropped, the next send tries again."""
+        self._lost = True
+        self._sequence.pending.clear()
 
     async def open(self) -> AsyncTrackStream:
-        """Sends the stream's ``open`` message (done by ``async with``)."""
-        await self._write(self._open_request)
+        """Opens the stream on the client's next replica that takes it (done by ``async with``)."""
+        if self._call is None:
+            await self._open_somewhere(None, raise_as_is=True)
         return self
+
+    def _live_call(self) -> TrackCall:
+        if self._call is None:
+            raise Unavailable("the Track stream is not open: use `async with client.track(...)`")
+        return self._call
 
     async def send(
         self, tracker_state: npt.ArrayLike, planner_state: npt.ArrayLike, d_obs: float | None = None
     ) -> int:
         """Sends one tick without waiting for its reply; returns its ``seq`` (arguments as :meth:`TrackStream.send`)."""
-        await self._write(convert.tick(self._dims, self._sequence.next_seq, tracker_state, planner_state, d_obs))
-        return self._sequence.sent()
+        request = convert.tick(self._dims, self._sequence.next_seq, tracker_state, planner_state, d_obs)
+        call = self._live_call()
+        if self._lost:
+            await self._reopen("the stream's replica went away earlier")
+        elif call.done():
+            ended = await self._status(call)
+            if _movable(ended):
+                await self._reopen(_why(ended))
+        seq = self._sequence.add(request)
+        try:
+            await self._live_call().write(request)
+        except (grpc.RpcError, asyncio.InvalidStateError) as e:
+            closed = Unavailable("the Track stream is closed")
+            fallback = from_rpc_error(e) if isinstance(e, grpc.RpcError) else closed
+            error = await self._status(self._live_call(), fallback)
+            if not _movable(error):
+                self._sequence.withdraw()
+                raise error from None
+            await self._reopen(_why(error))  # sends this tick again with the others unanswered
+        return seq
 
     async def recv(self) -> TrackReply:
         """The reply to the oldest tick still waiting (raises the tick's error, or the stream's)."""
-        expected = self._sequence.expect()
-        try:
-            response = await self._call.read()
-        except grpc.RpcError as e:
-            raise from_rpc_error(e) from None
-        return self._sequence.answer(expected, response)
+        self._sequence.check_waiting()
+        moves = 0
+        while True:
+            call = self._live_call()
+            try:
+                response = await call.read()
+            except grpc.RpcError as e:
+                error = from_rpc_error(e)
+                if not _movable(error):
+                    self._sequence.pending.popleft()
+                    raise error from None
+                why = _why(error)
+            except asyncio.InvalidStateError:
+                error = await self._status(call, Unavailable("the Track stream is closed"))
+                if not _movable(error):
+                    self._sequence.pending.popleft()
+                    raise error from None
+                why = _why(error)
+            else:
+                if isinstance(response, safety_pb2.TrackResponse):
+                    return self._sequence.answer(response)
+                why = "the server closed the stream with ticks unanswered"
+            moves += 1
+            if moves > self._replica_count:  # every replica took the stream and lost it without answering
+                call.cancel()
+                self._give_up()
+                raise _no_replica(why, "every replica took it and lost it again without answering")
+            await self._reopen(why)
 
     async def tick(
         self, tracker_state: npt.ArrayLike, planner_state: npt.ArrayLike, d_obs: float | None = None
@@ -169,12 +424,15 @@ class AsyncTrackStream:
     async def close(self, cancel: bool = False) -> None:
         """Ends the stream: no more ticks; replies not yet read are dropped. Without ``cancel`` the server
         answers the ticks in flight and ends the call normally; with it the call is cancelled at once."""
-        if cancel or self._call.done():
-            self._call.cancel()
+        call = self._call
+        if call is None:
+            return
+        if cancel or self._lost or call.done():
+            call.cancel()
             return
         try:
-            await self._call.done_writing()
-            while await self._call.read() is not grpc.aio.EOF:
+            await call.done_writing()
+            while await call.read() is not grpc.aio.EOF:
                 pass
         except (grpc.RpcError, asyncio.InvalidStateError):
             pass  # the stream had already failed; its error was (or would have been) raised by recv()

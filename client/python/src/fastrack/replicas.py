@@ -1,0 +1,71 @@
+"""The replicas a client talks to, taken round-robin call by call.
+
+A server address lists one endpoint or several separated by commas (``10.0.0.5:50051,10.0.0.6:50051``), or
+names a host that resolves to several addresses (a Kubernetes headless Service): each address is a replica,
+with its own gRPC channel. Names are resolved once, when the client is made: a client made before a scale-up
+does not see the new replicas until it is made again.
+
+Calls go round-robin over the replicas, the first to a random one (so that the clients of a fleet spread
+their first calls too). Idempotent unary calls that find a replica gone (``UNAVAILABLE``) are made again on
+the next ones, each replica at most once per pass (:class:`fastrack.Retry` says how many passes); admin
+calls and health checks go to one replica, once; ``Track`` streams move to another replica when theirs goes
+away (:mod:`fastrack.track`).
+"""
+
+from __future__ import annotations
+
+import random
+import threading
+from collections.abc import Sequence
+from typing import Generic, TypeVar
+
+import grpc
+
+from .errors import FastrackError, Unavailable
+
+T = TypeVar("T")
+
+CORE_INTERNAL_ERROR = "Internal error from Core"
+"""The details grpc.aio gives a call whose write failed because its connection broke: the call is ended
+with INTERNAL by the client library itself, not by a server."""
+
+
+class Rotation(Generic[T]):
+    """Round-robin over a fixed list of replicas, from a random start; thread-safe."""
+
+    def __init__(self, replicas: Sequence[T]) -> None:
+        if not replicas:
+            raise ValueError("a client needs at least one replica")
+        self.replicas: tuple[T, ...] = tuple(replicas)
+        self._next = random.randrange(len(self.replicas))
+        self._lock = threading.Lock()
+
+    def next(self) -> T:
+        """The next replica in turn."""
+        return self.rotation()[0]
+
+    def rotation(self) -> list[T]:
+        """Every replica once, from the next in turn on: where a call goes, then where it goes again if that
+        replica is gone."""
+        with self._lock:
+            start = self._next
+            self._next = (start + 1) % len(self.replicas)
+        count = len(self.replicas)
+        return [self.replicas[(start + k) % count] for k in range(count)]
+
+
+def replica_lost(error: FastrackError) -> bool:
+    """True when a stream's ``error`` means its replica is gone (so the stream may go on elsewhere) rather
+    than the stream refused: ``UNAVAILABLE`` (unreachable, a broken connection, or a draining server), or
+    the INTERNAL status grpc.aio makes up when a write meets a broken connection."""
+    return error.code == grpc.StatusCode.UNAVAILABLE or (
+        error.code == grpc.StatusCode.INTERNAL and error.message.startswith(CORE_INTERNAL_ERROR)
+    )
+
+
+def all_unavailable(failures: list[tuple[str, FastrackError]]) -> FastrackError:
+    """The error of a call that every replica it tried answered with ``UNAVAILABLE``: the error itself for
+    one replica, else one naming each replica and its answer."""
+    if len(failures) == 1:
+        return failures[0][1]
+    return Unavailable("no replica answered: " + "; ".join(f"{where}: {e.message}" for where, e in failures))

@@ -1,0 +1,291 @@
+"""A client of several replicas: calls go round-robin, unary calls skip a dead replica, and when a replica
+dies mid-run every robot's ``Track`` stream moves to another one and goes on, each tick answered exactly
+once, in order."""
+
+from __future__ import annotations
+
+import asyncio
+import signal
+import threading
+import time
+from collections import Counter
+from dataclasses import dataclass, field
+
+import pytest
+
+import fastrack
+from conftest import MODEL, Server, free_port
+from test_track import robot_state
+
+TICKS = 300
+"""Ticks per robot; the replica is killed once every robot has sent ``KILL_AFTER`` of them."""
+KILL_AFTER = 50
+RECOVERY_S = 5.0
+"""Every robot on the killed replica must be answered again this soon after the kill."""
+PAUSE_S = 0.002
+"""The robots' pause between ticks (a control loop, not a flood)."""
+
+
+@dataclass
+class Robot:
+    """What one robot saw."""
+
+    first_endpoint: str = ""
+    seqs: list[int] = field(default_factory=list)
+    reopened: int = 0
+    resent: int = 0
+    recovery: float | None = None
+    """Seconds from the kill to this robot's first reply after its stream moved."""
+    beta_old_after_move: float | None = None
+    """``beta_old`` of that reply: the new replica starts it again at ``beta_u``."""
+
+
+@dataclass
+class Kill:
+    """Kills ``victim`` once ``robots`` robots have sent ``KILL_AFTER`` ticks each."""
+
+    victim: Server
+    robots: int
+    ready: int = 0
+    at: float | None = None
+    lock: threading.Lock = field(default_factory=threading.Lock)
+    go: threading.Event = field(default_factory=threading.Event)
+
+    def robot_ready(self) -> None:
+        with self.lock:
+            self.ready += 1
+            if self.ready == self.robots:
+                self.go.set()
+
+    def kill(self) -> None:
+        self.at = time.monotonic()
+        self.victim.stop(signal.SIGKILL)
+
+    def since(self) -> float:
+        assert self.at is not None, "a stream moved before the replica was killed"
+        return time.monotonic() - self.at
+
+
+def check(seen: list[Robot], victim: Server, addresses: list[str], beta_u: float) -> float:
+    """Every tick answered once, in order; the robots of the killed replica moved once, the others never;
+    the streams were spread over the replicas. Returns the slowest recovery, seconds."""
+    per_replica = Counter(robot.first_endpoint for robot in seen)
+    assert sorted(per_replica) == sorted(addresses), per_replica
+    fair = len(seen) // len(addresses)
+    assert all(fair <= n <= fair + 1 for n in per_replica.values()), per_replica  # round-robin opens
+    for i, robot in enumerate(seen):
+        assert robot.seqs == list(range(TICKS)), f"robot {i}: each tick answered once, in order"
+        on_victim = robot.first_endpoint == victim.address
+        assert robot.reopened == int(on_victim), f"robot {i} on {robot.first_endpoint}"
+        assert (robot.recovery is not None) == on_victim, f"robot {i}"
+        assert robot.resent <= 1, f"robot {i}: one tick in flight at a time, {robot.resent} resent"
+        if on_victim:
+            assert robot.beta_old_after_move == beta_u, f"robot {i}: beta_old restarts at beta_u on the new replica"
+    slowest = max(robot.recovery for robot in seen if robot.recovery is not None)
+    resent = sum(robot.resent for robot in seen)
+    print(
+        f"{per_replica[victim.address]} of {len(seen)} robots moved off the killed replica, {resent} ticks resent;"
+        f" every robot served again within {slowest * 1000:.0f} ms"
+    )
+    assert slowest < RECOVERY_S, f"a robot waited {slowest:.2f} s after the kill"
+    return slowest
+
+
+def test_sync_robots_on_a_killed_replica_move_and_every_tick_is_answered_once(replicas: list[Server]) -> None:
+    addresses = [server.address for server in replicas]
+    robots = 20
+    kill = Kill(replicas[1], robots)
+    with fastrack.Client(",".join(addresses), timeout=10.0) as client:
+        assert client.endpoints == addresses
+        beta_u = client.query_planner_control(MODEL).beta_query
+        client.dims(MODEL)
+        seen = [Robot() for _ in range(robots)]
+        failures: list[BaseException] = []
+
+        def robot(index: int) -> None:
+            me = seen[index]
+            try:
+                with client.track(MODEL) as stream:
+                    me.first_endpoint = stream.endpoint
+                    for seq in range(TICKS):
+                        if seq == KILL_AFTER:
+                            kill.robot_ready()
+                        before = stream.reopened
+                        reply = stream.tick(*robot_state(seq, index))
+                        if stream.reopened > before:
+                            me.recovery, me.beta_old_after_move = kill.since(), reply.beta_old
+                        me.seqs.append(reply.seq)
+                        time.sleep(PAUSE_S)
+                    me.reopened, me.resent = stream.reopened, stream.resent
+            except BaseException as e:  # noqa: BLE001 - reported by the test's thread
+                failures.append(e)
+                kill.go.set()
+
+        threads = [threading.Thread(target=robot, args=(i,)) for i in range(robots)]
+        for thread in threads:
+            thread.start()
+        assert kill.go.wait(timeout=60)
+        kill.kill()
+        for thread in threads:
+            thread.join(timeout=120)
+        assert not failures, failures
+        check(seen, replicas[1], addresses, beta_u)
+
+        # Unary calls skip the dead replica: every one succeeds, even without retries (the replica hops are
+        # not retries).
+        with fastrack.Client(",".join(addresses), retry=fastrack.Retry(attempts=1)) as once:
+            for _ in range(9):
+                assert once.query_planner_control(MODEL, 3.0).beta_query > 0
+                assert client.tracking_control(MODEL, [[0.1, 0.0, 1.5, 1.0]], 0.6).controls.shape == (1, 2)
+
+
+async def test_async_robots_on_a_killed_replica_move_and_every_tick_is_answered_once(replicas: list[Server]) -> None:
+    addresses = [server.address for server in replicas]
+    robots = 50
+    kill = Kill(replicas[2], robots)
+    async with fastrack.AsyncClient(",".join(addresses), timeout=10.0) as client:
+        beta_u = (await client.query_planner_control(MODEL)).beta_query
+        await client.dims(MODEL)
+
+        async def robot(index: int) -> Robot:
+            me = Robot()
+            async with client.track(MODEL) as stream:
+                me.first_endpoint = stream.endpoint
+                for seq in range(TICKS):
+                    if seq == KILL_AFTER:
+                        kill.robot_ready()
+                    before = stream.reopened
+                    reply = await stream.tick(*robot_state(seq, index))
+                    if stream.reopened > before:
+                        me.recovery, me.beta_old_after_move = kill.since(), reply.beta_old
+                    me.seqs.append(reply.seq)
+                    await asyncio.sleep(PAUSE_S)
+                me.reopened, me.resent = stream.reopened, stream.resent
+            return me
+
+        async def killer() -> None:
+            while not kill.go.is_set():
+                await asyncio.sleep(0.005)
+            kill.kill()
+
+        kill_task = asyncio.create_task(killer())
+        try:
+            seen = await asyncio.gather(*(robot(i) for i in range(robots)))
+            await kill_task
+        finally:
+            kill_task.cancel()
+        check(seen, replicas[2], addresses, beta_u)
+        for _ in range(9):
+            assert (await client.query_planner_control(MODEL, 3.0)).beta_query > 0
+        assert (await client.evaluate(MODEL, [[0.1, 0.0, 1.5, 1.0]], 0.6)).values.shape == (1,)
+
+
+def test_a_draining_replica_hands_its_streams_over(replicas: list[Server]) -> None:
+    with fastrack.Client(",".join(server.address for server in replicas[:2])) as client:
+        with client.track(MODEL) as robot:
+            assert robot.tick(*robot_state(0, 0)).seq == 0
+            draining = next(server for server in replicas if server.address == robot.endpoint)
+            draining.stop(signal.SIGTERM)  # "the server is shutting down; reconnect to continue"
+            sent = [robot.send(*robot_state(seq, 0)) for seq in range(1, 6)]
+            assert [robot.recv().seq for _ in sent] == sent
+            assert robot.reopened == 1 and robot.endpoint != draining.address
+            assert robot.resent <= len(sent)
+
+
+def test_a_stream_no_replica_takes_fails_then_reopens_when_one_is_back(replicas: list[Server]) -> None:
+    first, second = replicas[:2]
+    with fastrack.Client(f"{first.address},{second.address}") as client:
+        with client.track(MODEL) as robot:
+            assert robot.tick(*robot_state(0, 0)).seq == 0
+            first.stop()
+            second.stop()
+            with pytest.raises(fastrack.Unavailable, match="no replica took the stream again") as lost:
+                robot.tick(*robot_state(1, 0))
+            assert "went away" in lost.value.message, lost.value.message
+            with pytest.raises(fastrack.FastrackError, match="recv\\(\\) without a tick"):
+                robot.recv()  # the tick that no replica took was dropped
+            second.start().wait_serving()
+            client.wait_until_serving(timeout=10)  # the client's channel to it connected again
+            seq = robot.send(*robot_state(2, 0))  # the next tick opens the stream again
+            assert robot.recv().seq == seq and robot.endpoint == second.address and robot.reopened == 1
+
+
+async def test_an_async_stream_no_replica_takes_fails_then_reopens(replicas: list[Server]) -> None:
+    first, second = replicas[:2]
+    async with fastrack.AsyncClient(f"{first.address},{second.address}") as client:
+        async with client.track(MODEL) as robot:
+            assert (await robot.tick(*robot_state(0, 0))).seq == 0
+            first.stop()
+            second.stop()
+            with pytest.raises(fastrack.Unavailable, match="went away .*; no replica took the stream again"):
+                await robot.tick(*robot_state(1, 0))
+            first.start().wait_serving()
+            await client.wait_until_serving(timeout=10)
+            seq = await robot.send(*robot_state(2, 0))
+            assert (await robot.recv()).seq == seq and robot.endpoint == first.address and robot.reopened == 1
+
+
+def test_a_dead_address_beside_a_live_one(server: Server) -> None:
+    dead = f"127.0.0.1:{free_port()}"
+    with fastrack.Client(f"{dead}, http://{server.address}") as client:
+        assert client.endpoints == [dead, server.address]
+        client.wait_until_serving(timeout=5)
+        for _ in range(4):
+            assert client.get_model(MODEL).name == MODEL
+        for _ in range(3):  # whichever replica is next, the stream opens on the live one
+            with client.track(MODEL) as robot:
+                assert robot.endpoint == server.address
+                assert robot.tick(*robot_state(0, 0)).seq == 0
+        # Admin calls go to one replica, once: of two in a row, one reaches the dead replica and fails.
+        outcomes = set()
+        for _ in range(2):
+            try:
+                client.unload_model("no-such-model")
+            except fastrack.FastrackError as e:
+                outcomes.add(type(e))
+        assert outcomes == {fastrack.Unavailable, fastrack.NotFound}
+
+
+async def test_async_dead_address_beside_a_live_one(server: Server) -> None:
+    dead = f"127.0.0.1:{free_port()}"
+    async with fastrack.AsyncClient(f"{server.address},{dead}") as client:
+        await client.wait_until_serving(timeout=5)
+        for _ in range(4):
+            assert (await client.tracking_error_bound(MODEL, 1.0)).radius > 0
+        for _ in range(3):
+            async with client.track(MODEL) as robot:
+                assert robot.endpoint == server.address
+                assert (await robot.tick(*robot_state(0, 0))).seq == 0
+
+
+def test_only_dead_addresses_fail_clearly() -> None:
+    dead, dead_too = f"127.0.0.1:{free_port()}", f"127.0.0.1:{free_port()}"
+    with fastrack.Client(dead, retry=fastrack.Retry(attempts=1)) as client:
+        with pytest.raises(fastrack.Unavailable, match="failed to connect"):
+            client.list_models()
+        with pytest.raises(fastrack.Unavailable, match="failed to connect"):
+            client.track(MODEL)
+        with pytest.raises(fastrack.Unavailable, match=f"server {dead} not SERVING after 0.3 s"):
+            client.wait_until_serving(timeout=0.3)
+    with fastrack.Client(f"{dead},{dead_too}", retry=fastrack.Retry(attempts=2, initial_backoff=0.01)) as client:
+        with pytest.raises(fastrack.Unavailable) as both:
+            client.query_planner_control(MODEL)
+        assert both.value.message.startswith("no replica answered: ")
+        assert f"{dead}: failed to connect" in both.value.message and f"{dead_too}: " in both.value.message
+
+
+def test_addresses_are_checked_and_names_resolved(server: Server) -> None:
+    with pytest.raises(fastrack.ConfigError, match="item 2 of the comma-separated list is empty"):
+        fastrack.Client(f"{server.address},,127.0.0.1:1")
+    with pytest.raises(fastrack.ConfigError, match="item 2 of the comma-separated list is empty"):
+        fastrack.Client(f"{server.address}, ")
+    with pytest.raises(fastrack.ConfigError, match="'127.0.0.1': expected host:port"):
+        fastrack.Client(f"{server.address},127.0.0.1")
+    with pytest.raises(fastrack.ConfigError, match="https://127.0.0.1:2: an https:// address needs TLS"):
+        fastrack.Client("127.0.0.1:1,https://127.0.0.1:2")
+    assert fastrack.Client("[::1]:7,127.0.0.1:8").endpoints == ["[::1]:7", "127.0.0.1:8"]
+    port = server.port
+    with fastrack.Client(f"localhost:{port}") as named:  # every address localhost has is a replica
+        assert named.endpoints and all(e.endswith(f":{port}") for e in named.endpoints), named.endpoints
+        assert f"127.0.0.1:{port}" in named.endpoints
+        assert named.query_planner_control(MODEL, 2.5).beta_query == pytest.approx(0.65)
