@@ -249,7 +249,9 @@ impl OnlineLoop {
         let d_obs = (!self.obstacles.is_empty()).then(|| clearance(&self.obstacles, position));
         let beta_old = self.beta_query;
         let speed = query_planner_control(&self.speeds, d_obs);
-        let replanned = newly_sensed || self.replan_flag;
+        // The flag stays set until a path is planned: a step that failed to plan plans again next time.
+        self.replan_flag |= newly_sensed;
+        let replanned = self.replan_flag;
         if replanned {
             let path = planner.plan(&PlanRequest {
                 start: self.planner,

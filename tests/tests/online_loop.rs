@@ -109,3 +109,42 @@ async fn bad_tracker_states_and_a_vanished_server_are_errors() {
     let gone = online.step(&[0.0, 0.0, ALONG_X, 1.0], &[], &mut planner).await.unwrap_err();
     assert!(matches!(gone, LoopError::Client(_)), "{gone}");
 }
+
+/// A raw-path planner that fails its first `failures` requests, then plans with A*.
+struct FailingFirst {
+    failures: usize,
+    requests: usize,
+}
+
+impl fastrack_online::raw_path::RawPathPlanner for FailingFirst {
+    fn plan(
+        &mut self,
+        request: &fastrack_online::raw_path::PlanRequest<'_>,
+    ) -> Result<Vec<[f64; 2]>, fastrack_online::raw_path::PlanError> {
+        self.requests += 1;
+        if self.requests <= self.failures {
+            return Err(fastrack_online::raw_path::PlanError::Settings("planner not ready".into()));
+        }
+        GridAStar::default().plan(request)
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_step_whose_plan_failed_plans_again_next_time() {
+    let (_server, client) = shipped_server().await;
+    let mut online = OnlineLoop::start(&client, settings(), [0.0, 0.0]).await.unwrap();
+    let mut planner = FailingFirst { failures: 0, requests: 0 };
+    let tracker = [0.0, 0.0, ALONG_X, 1.0];
+    online.step(&tracker, &[], &mut planner).await.unwrap();
+    // The obstacle is sensed while the planner fails: the step is an error ...
+    let obstacle = Obstacle::Circle { center: [5.0, 0.0], radius: 0.5 };
+    planner.failures = planner.requests + 1;
+    let failed = online.step(&tracker, std::slice::from_ref(&obstacle), &mut planner).await;
+    assert!(matches!(failed, Err(LoopError::Plan(_))), "{:?}", failed.map(|r| r.branch));
+    // ... and the next step, the obstacle no longer new, plans around it rather than follow the old path.
+    let step = online.step(&tracker, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
+    assert!(step.replanned, "{step:?}");
+    for point in online.raw_path() {
+        assert!(clearance(std::slice::from_ref(&obstacle), *point) > step.steb_radius, "{point:?}");
+    }
+}
