@@ -295,8 +295,8 @@ impl FastrackClient {
         request
     }
 
-    /// An idempotent unary call: on the next replica, and again on the following ones while they answer
-    /// `UNAVAILABLE` (each replica at most once).
+    /// An idempotent unary call: on the next replica, and again on the following ones while they are gone
+    /// (`UNAVAILABLE` or a failed connection; each replica at most once).
     async fn idempotent<M, R, F, Fut>(&self, message: M, call: F) -> Result<R, ClientError>
     where
         M: Clone,
@@ -307,7 +307,7 @@ impl FastrackClient {
         for replica in self.replicas.rotation() {
             match call(replica.channel.clone(), self.request(message.clone())).await {
                 Ok(response) => return Ok(response.into_inner()),
-                Err(status) if status.code() == tonic::Code::Unavailable => last = Some(status),
+                Err(status) if replicas::replica_lost(&status) => last = Some(status),
                 Err(status) => return Err(status.into()),
             }
         }

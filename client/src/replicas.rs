@@ -53,6 +53,14 @@ impl Replicas {
     }
 }
 
+/// True when `status` means the replica is gone rather than the call refused, so the call or stream may go on
+/// elsewhere: `UNAVAILABLE` (unreachable, or draining), or any status the transport made from a failed
+/// connection (a killed replica's streams end `UNKNOWN` with a reset connection, calls on its closed
+/// connection `CANCELLED`); a status a server sent carries no transport error.
+pub fn replica_lost(status: &tonic::Status) -> bool {
+    status.code() == tonic::Code::Unavailable || std::error::Error::source(status).is_some()
+}
+
 /// The endpoints a server address names: its comma-separated parts, each host name resolved to every address
 /// it has. Returns `(endpoint, TLS server name)` pairs; the name is the host as written.
 pub async fn resolve(address: &str) -> Result<Vec<(String, Option<String>)>, ClientError> {

@@ -8,6 +8,7 @@
 //! except `beta_old`, which starts again at `beta_u` on the new replica (the reply's `beta_old` says so; a
 //! robot's own loop keeps its own).
 
+use crate::replicas::replica_lost;
 use crate::{pb, ClientError, FastrackClient};
 use std::collections::VecDeque;
 use tokio_stream::wrappers::ReceiverStream;
@@ -35,17 +36,6 @@ struct Opened {
     endpoint: String,
     ticks: tokio::sync::mpsc::Sender<pb::TrackRequest>,
     replies: tonic::Streaming<pb::TrackResponse>,
-}
-
-/// True when `status` means the replica is gone rather than the stream refused, so the stream may go on
-/// elsewhere: `UNAVAILABLE` (unreachable, or draining), or a connection that broke under the stream (an
-/// `UNKNOWN` status made by the transport, not sent by a server: it carries the transport's error).
-fn replica_lost(status: &tonic::Status) -> bool {
-    match status.code() {
-        tonic::Code::Unavailable => true,
-        tonic::Code::Unknown => std::error::Error::source(status).is_some(),
-        _ => false,
-    }
 }
 
 impl TrackStream {
