@@ -4,7 +4,8 @@
 //! `ticks(n) / (n ticks(1))`); and the time from a replica's death (SIGKILL) until every robot that was on it
 //! is served again by another, over several trials. Prints tables and writes `bench/results/replicas.{json,md}`.
 //!
-//! Run: `cargo build --release --bins && cargo bench -p fastrack-e2e --bench replicas`.
+//! Run: `cargo build --release --bins && cargo bench -p fastrack-e2e --bench replicas` (or with `--profile dev`
+//! against the dev build's servers, whose dependencies are optimised as well).
 
 use fastrack_cli::load_generator::{run_load, LoadSpec, Workload};
 use fastrack_client::{model_ref, ClientOptions, FastrackClient};
@@ -23,7 +24,6 @@ const WARMUP: Duration = Duration::from_millis(500);
 const ROBOTS: u64 = 48;
 const CONTROL_PERIOD: Duration = Duration::from_millis(10);
 const TRIALS: usize = 5;
-const COMMAND: &str = "cargo build --release --bins && cargo bench -p fastrack-e2e --bench replicas";
 
 async fn start(count: usize) -> anyhow::Result<Vec<TestServer>> {
     let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
@@ -136,10 +136,14 @@ fn main() -> anyhow::Result<()> {
     }
     println!("\n{}\n{}", table.to_markdown(), failover_table.to_markdown());
     let out = Path::new(env!("CARGO_MANIFEST_DIR")).join("../bench/results");
+    let command = match profile.as_str() {
+        "release" => "cargo build --release --bins && cargo bench -p fastrack-e2e --bench replicas".to_string(),
+        other => format!("cargo bench --profile dev -p fastrack-e2e --bench replicas (servers from target/{other})"),
+    };
     let path = write_record(
         &out,
         "replicas",
-        COMMAND,
+        &command,
         json!({
             "model": MODEL, "server": format!("target/{profile}/fastrack-server, defaults; every replica on this machine"),
             "throughput": {"streams": STREAMS, "duration_s": DURATION.as_secs_f64(), "warmup_s": WARMUP.as_secs_f64(),
