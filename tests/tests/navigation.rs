@@ -140,5 +140,5 @@ async fn a_run_never_holds_up_the_runtime_it_was_started_from() {
     let longest_gap = ticker.await.unwrap();
     assert_eq!(done.method, "MPPI");
     assert!(wall.as_secs_f64() > 1.0, "the run took {wall:?}: too short to tell");
-    assert!(longest_gap.as_secs_f64() < 0.25, "the ticker waited {longest_gap:?} during a run of {wall:?}");
+    assert!(longest_gap.as_secs_f64() < 0.5, "the ticker waited {longest_gap:?} during a run of {wall:?}");
 }
