@@ -35,6 +35,11 @@ impl Replicas {
         Self { replicas, next: AtomicUsize::new(start) }
     }
 
+    /// How many replicas there are.
+    pub fn count(&self) -> usize {
+        self.replicas.len()
+    }
+
     /// The next replica in round-robin order.
     pub fn next(&self) -> &Replica {
         self.rotation().next().expect("a client has at least one replica")

@@ -1,10 +1,10 @@
 //! `Track` streams that survive the loss of a replica.
 //!
 //! A stream remembers the ticks it sent and that are not answered yet. When its server goes away (the stream
-//! ends with `UNAVAILABLE`, as a draining replica's streams do, its connection breaks, as a killed replica's
-//! does, or it closes with ticks unanswered), it
-//! reopens on the client's next replica and sends those ticks again, so every tick is answered exactly once
-//! as seen by the robot. Nothing else needs carrying over: the server keeps no state a robot cannot resend,
+//! ends with `UNAVAILABLE`, as a draining replica's streams do; its connection breaks, as a killed replica's
+//! does; or it closes with ticks unanswered), it reopens on the client's next replica and sends those ticks
+//! again, so every tick is answered exactly once as seen by the robot. A stream that every replica in turn
+//! takes and loses without answering gives up. Nothing else needs carrying over: the server keeps no state a robot cannot resend,
 //! except `beta_old`, which starts again at `beta_u` on the new replica (the reply's `beta_old` says so; a
 //! robot's own loop keeps its own).
 
@@ -27,6 +27,8 @@ pub struct TrackStream {
     unanswered: VecDeque<pb::TrackTick>,
     /// The replica went away with nothing unanswered: the next send reopens.
     lost: bool,
+    /// Moves since the last reply.
+    moves_unanswered: usize,
     reopened: usize,
     resent: usize,
 }
@@ -50,6 +52,7 @@ impl TrackStream {
             replies: opened.replies,
             unanswered: VecDeque::new(),
             lost: false,
+            moves_unanswered: 0,
             reopened: 0,
             resent: 0,
         })
@@ -77,6 +80,13 @@ impl TrackStream {
 
     /// Reopens on another replica, after `why` ended the stream, and sends the unanswered ticks again.
     async fn reopen(&mut self, why: &str) -> Result<(), ClientError> {
+        if self.moves_unanswered >= self.client.replicas.count() {
+            return Err(ClientError::Status(tonic::Status::unavailable(format!(
+                "{why}; the stream moved {} times without an answer: every replica lost it",
+                self.moves_unanswered
+            ))));
+        }
+        self.moves_unanswered += 1;
         let opened = Self::open_somewhere(&self.client, &self.open).await.map_err(|e| {
             ClientError::Status(tonic::Status::unavailable(format!("{why}; no replica took the stream again: {e}")))
         })?;
@@ -113,6 +123,7 @@ impl TrackStream {
             match self.replies.message().await {
                 Ok(Some(response)) => {
                     self.unanswered.pop_front();
+                    self.moves_unanswered = 0;
                     return Ok(response.reply);
                 }
                 Ok(None) if self.unanswered.is_empty() => return Ok(None),
