@@ -41,7 +41,8 @@ struct Opened {
 }
 
 impl TrackStream {
-    /// Opens a stream for `open` on the client's next replica that takes it (each replica tried once).
+    /// Opens a stream for `open` on the client's next replica that takes it within the client's deadline (each
+    /// replica tried once).
     pub(crate) async fn open(client: &FastrackClient, open: pb::TrackOpen) -> Result<Self, ClientError> {
         let opened = Self::open_somewhere(client, &open).await?;
         Ok(Self {
@@ -64,15 +65,21 @@ impl TrackStream {
             let (tx, rx) = tokio::sync::mpsc::channel(SEND_BUFFER);
             let message = pb::TrackRequest { msg: Some(pb::track_request::Msg::Open(open.clone())) };
             tx.send(message).await.map_err(|_| tonic::Status::internal("stream closed before its open message"))?;
-            let call = pb::safety_service_client::SafetyServiceClient::new(replica.channel.clone())
-                .track(client.authorized(ReceiverStream::new(rx)))
-                .await;
-            match call {
-                Ok(response) => {
+            let mut service = pb::safety_service_client::SafetyServiceClient::new(replica.channel.clone());
+            let call = service.track(client.authorized(ReceiverStream::new(rx)));
+            // A replica that takes the connection but never answers is as good as gone.
+            match tokio::time::timeout(client.request_timeout, call).await {
+                Ok(Ok(response)) => {
                     return Ok(Opened { endpoint: replica.endpoint.clone(), ticks: tx, replies: response.into_inner() })
                 }
-                Err(status) if replica_lost(&status) => last = Some(status),
-                Err(status) => return Err(status.into()),
+                Ok(Err(status)) if replica_lost(&status) => last = Some(status),
+                Ok(Err(status)) => return Err(status.into()),
+                Err(_) => {
+                    last = Some(tonic::Status::unavailable(format!(
+                        "{} did not open the stream within {:?}",
+                        replica.endpoint, client.request_timeout
+                    )))
+                }
             }
         }
         Err(last.unwrap_or_else(|| tonic::Status::unavailable("no replica to open a Track stream on")).into())

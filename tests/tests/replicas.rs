@@ -132,3 +132,28 @@ async fn a_client_connects_while_a_replica_is_down_and_a_dead_address_alone_is_a
     let named = named.unwrap();
     assert!(named.endpoints().iter().all(|e| e.ends_with(&format!(":{port}"))), "{:?}", named.endpoints());
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_replica_that_never_answers_is_passed_over_when_a_stream_opens() {
+    let (servers, _) = replicas(1).await;
+    // It takes connections and says nothing.
+    let silent = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
+    let address = format!("http://{},{}", silent.local_addr().unwrap(), servers[0].endpoint);
+    let held = tokio::spawn(async move {
+        let mut connections = Vec::new();
+        while let Ok((connection, _)) = silent.accept().await {
+            connections.push(connection);
+        }
+    });
+    let options = ClientOptions { request_timeout: Duration::from_millis(500), ..ClientOptions::default() };
+    let client = FastrackClient::connect(&address, options).await.unwrap();
+    let started = Instant::now();
+    for robot in 0..4 {
+        let mut stream = client.track(model_ref("dubins4d", 0), 0.0).await.unwrap();
+        assert_eq!(stream.endpoint(), servers[0].endpoint, "robot {robot}");
+        assert_eq!(stream.tick(robot_tick(0, robot)).await.unwrap().seq, 0);
+    }
+    // Round-robin sent two of the four opens to the silent replica first: each waited out its deadline.
+    assert!(started.elapsed() >= Duration::from_millis(1000), "{:?}", started.elapsed());
+    held.abort();
+}
