@@ -303,9 +303,11 @@ impl FastrackClient {
         F: Fn(Channel, tonic::Request<M>) -> Fut,
         Fut: Future<Output = Result<tonic::Response<R>, tonic::Status>>,
     {
-        let mut last = None;
-        for replica in self.replicas.rotation() {
-            match call(replica.channel.clone(), self.request(message.clone())).await {
+        let (mut last, mut message, count) = (None, Some(message), self.replicas.count());
+        for (k, replica) in self.replicas.rotation().enumerate() {
+            // Every replica but the last gets a copy (the batch may be needed again); with one, none is made.
+            let Some(attempt) = (if k + 1 < count { message.clone() } else { message.take() }) else { break };
+            match call(replica.channel.clone(), self.request(attempt)).await {
                 Ok(response) => return Ok(response.into_inner()),
                 Err(status) if replicas::replica_lost(&status) => last = Some(status),
                 Err(status) => return Err(status.into()),
