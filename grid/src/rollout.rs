@@ -122,19 +122,6 @@ fn check(options: &RolloutOptions) -> Result<(), RolloutError> {
     Ok(())
 }
 
-/// `dV/dr` of the solution's interpolant by central differences across one cell.
-fn gradient(solution: &Solution, r: &[f64], shifted: &mut [f64], out: &mut [f64]) {
-    for (i, axis) in solution.grid.axes().iter().enumerate() {
-        let h = axis.spacing();
-        shifted.copy_from_slice(r);
-        shifted[i] = r[i] + 0.5 * h;
-        let up = solution.grid.interpolate(&solution.values, shifted);
-        shifted[i] = r[i] - 0.5 * h;
-        let down = solution.grid.interpolate(&solution.values, shifted);
-        out[i] = (up - down) / h;
-    }
-}
-
 /// `(sustained error, peak error, left the domain)` of one rollout from `start`.
 fn roll_out(
     system: &AffineSystem,
@@ -146,13 +133,13 @@ fn roll_out(
 ) -> (f64, f64, bool) {
     let params = &solution.info.params;
     let n = start.len();
-    let (mut r, mut p, mut shifted) = (start.to_vec(), vec![0.0; n], vec![0.0; n]);
+    let (mut r, mut p) = (start.to_vec(), vec![0.0; n]);
     let steps = (options.horizon / options.step).round() as usize;
     let (mut sustained, mut peak, mut left) = (0.0f64, system.tracking_error(&r), false);
     let d = vec![0.0; system.disturbances.len()];
     for k in 0..steps {
         let t = k as f64 * options.step;
-        gradient(solution, &r, &mut shifted, &mut p);
+        solution.gradient(&r, &mut p);
         let u = system.optimal_control(&r, &p);
         let u_p = planner.input(system, params, &p, t, options.mean_dwell, rng);
         step_relative(system, &mut r, HeldInputs { control: &u, planner: &u_p, disturbance: &d }, options.step);

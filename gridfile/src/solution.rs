@@ -108,3 +108,19 @@ pub struct Solution {
     /// How it was computed.
     pub info: SolveInfo,
 }
+
+impl Solution {
+    /// `dV/dr` of the interpolant at `r` by central differences across one cell, into `out`.
+    pub fn gradient(&self, r: &[f64], out: &mut [f64]) {
+        let mut shifted = r.to_vec();
+        for (i, axis) in self.grid.axes().iter().enumerate() {
+            let h = axis.spacing();
+            shifted[i] = r[i] + 0.5 * h;
+            let up = self.grid.interpolate(&self.values, &shifted);
+            shifted[i] = r[i] - 0.5 * h;
+            let down = self.grid.interpolate(&self.values, &shifted);
+            shifted[i] = r[i];
+            out[i] = (up - down) / h;
+        }
+    }
+}

@@ -55,11 +55,35 @@ pub fn model_info(m: &Manifest, space: &StateSpace) -> pb::ModelInfo {
                 learned_level: row.level,
                 verified_level: row.verification.as_ref().map(|v| v.verified_level),
                 extent: row.extent.clone(),
+                verification: row.verification.as_ref().map(verification),
             })
             .collect(),
         untrained: m.untrained,
         onnx_sha256: m.onnx_sha256.clone(),
         manifest_json: m.to_json(),
         is_default_version: false,
+    }
+}
+
+fn verification(v: &fastrack_valuefn::manifest::Verification) -> pb::Verification {
+    pb::Verification {
+        verified_level: v.verified_level,
+        eps: v.eps,
+        delta: v.delta,
+        samples: v.samples as u64,
+        violations: v.violations as u64,
+        rounds: v.rounds as u32,
+        sampled_level: v.sampled_level,
+        horizon: v.horizon,
+        step: v.step,
+        planners: v
+            .planners
+            .iter()
+            .map(|p| pb::PlannerResult {
+                family: p.family.clone(),
+                rollouts: p.rollouts as u64,
+                max_error: p.max_error,
+            })
+            .collect(),
     }
 }

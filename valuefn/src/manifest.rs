@@ -156,24 +156,61 @@ impl TebRow {
     }
 }
 
-/// Scenario-based verification of one TEB row (Lin & Bansal).
+/// Scenario-based verification of one TEB row (Lin & Bansal), with their iterated level correction: states are
+/// sampled from `{V <= sampled_level}` and rolled out against every planner family; while a round has samples
+/// whose error exceeds the level they were sampled under, the level is raised to the largest error and the
+/// next round samples afresh.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Verification {
-    /// Corrected level: the largest error reached from the sampled sublevel set.
+    /// Corrected level: the largest error reached from the final round's sampled set.
     pub verified_level: f64,
     /// Violation-probability bound epsilon.
     pub eps: f64,
     /// Confidence parameter delta.
     pub delta: f64,
-    /// Number of sampled states.
+    /// Number of sampled states (of the final round).
     pub samples: usize,
-    /// Samples whose rollout exceeded the learned level.
+    /// Samples of the final round whose rollout exceeded the level they were sampled under (0 when the
+    /// correction converged).
     pub violations: usize,
     /// Rollout horizon (s).
     pub horizon: f64,
     /// Integration step (s).
     pub step: f64,
+    /// The level of the final round's sampled set `{V <= sampled_level}` (absent in bundles verified without
+    /// the iterated correction).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub sampled_level: Option<f64>,
+    /// Rounds of the iterated level correction (1: the first sampled level held).
+    #[serde(default = "one_round")]
+    pub rounds: usize,
+    /// The planner families of the final round, with the largest error each forced.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub planners: Vec<PlannerResult>,
+}
+
+fn one_round() -> usize {
+    1
+}
+
+impl Verification {
+    /// The planner family that forced the largest error, if the families were recorded.
+    pub fn hardest_planner(&self) -> Option<&PlannerResult> {
+        self.planners.iter().max_by(|a, b| a.max_error.total_cmp(&b.max_error))
+    }
+}
+
+/// What one planner family forced in a verification's final round.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct PlannerResult {
+    /// The family, e.g. `model-worst-case`, `grid-worst-case`, `random-bang-bang`, `search`.
+    pub family: String,
+    /// Rollouts it played.
+    pub rollouts: usize,
+    /// The largest tracking error it forced.
+    pub max_error: f64,
 }
 
 /// Training provenance.

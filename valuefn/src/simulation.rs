@@ -54,6 +54,13 @@ pub enum Planner {
         /// When the next switch is due (s).
         next_switch: f64,
     },
+    /// A fixed sequence of inputs, each held for `segment` seconds (the last one past the end).
+    Schedule {
+        /// The inputs in turn.
+        inputs: Vec<Vec<f64>>,
+        /// How long each is held (s).
+        segment: f64,
+    },
 }
 
 impl Planner {
@@ -81,6 +88,10 @@ impl Planner {
                     *next_switch = t + exponential(mean_dwell, rng);
                 }
                 input.clone()
+            }
+            Planner::Schedule { inputs, segment } => {
+                let k = ((t / *segment).floor().max(0.0) as usize).min(inputs.len().saturating_sub(1));
+                inputs.get(k).cloned().unwrap_or_else(|| vec![0.0; system.planner_input_param.len()])
             }
         }
     }

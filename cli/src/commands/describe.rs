@@ -56,7 +56,8 @@ fn model_json(m: &pb::ModelInfo) -> Value {
         "controls": m.controls.iter().map(|c| json!({"name": c.name, "unit": c.unit,
             "min": c.bounds.map(|b| b.min), "max": c.bounds.map(|b| b.max)})).collect::<Vec<_>>(),
         "teb_table": m.teb_table.iter().map(|r| json!({"beta": r.beta, "level": r.level,
-            "learned_level": r.learned_level, "verified_level": r.verified_level, "extent": r.extent})).collect::<Vec<_>>(),
+            "learned_level": r.learned_level, "verified_level": r.verified_level, "extent": r.extent,
+            "verification": r.verification.as_ref().map(verification_json)})).collect::<Vec<_>>(),
         "onnx_sha256": m.onnx_sha256,
     })
 }
@@ -89,10 +90,33 @@ fn model_text(m: &pb::ModelInfo) -> String {
         let r = p.range.unwrap_or_default();
         out += &format!("\n    {:<8} [{}, {}] {}", p.name, r.min, r.max, p.unit);
     }
-    out += "\n  TEB table:\n    beta      level    learned  verified";
+    out += "\n  TEB table:\n    beta      level    learned  verified  evidence";
     for r in &m.teb_table {
         let verified = r.verified_level.map_or("-".to_string(), |v| format!("{v:.4}"));
-        out += &format!("\n    {:<8.4}  {:<7.4}  {:<7.4}  {verified}", r.beta, r.level, r.learned_level);
+        let evidence = r.verification.as_ref().map_or(String::new(), verification_text);
+        out += &format!("\n    {:<8.4}  {:<7.4}  {:<7.4}  {verified:<8}  {evidence}", r.beta, r.level, r.learned_level);
     }
     out
+}
+
+fn verification_json(v: &pb::Verification) -> Value {
+    json!({"eps": v.eps, "delta": v.delta, "samples": v.samples, "violations": v.violations, "rounds": v.rounds,
+        "sampled_level": v.sampled_level, "horizon": v.horizon, "step": v.step,
+        "planners": v.planners.iter().map(|p| json!({"family": p.family, "rollouts": p.rollouts,
+            "max_error": p.max_error})).collect::<Vec<_>>()})
+}
+
+/// `eps 0.001, delta 1e-6, N 29632, 0 violations, 2 rounds, 10 s; hardest model-worst-case`.
+fn verification_text(v: &pb::Verification) -> String {
+    let hardest = v.planners.iter().max_by(|a, b| a.max_error.total_cmp(&b.max_error));
+    format!(
+        "eps {}, delta {}, N {}, {} violations, {} rounds, {} s{}",
+        v.eps,
+        v.delta,
+        v.samples,
+        v.violations,
+        v.rounds,
+        v.horizon,
+        hardest.map_or(String::new(), |p| format!("; hardest {}", p.family))
+    )
 }

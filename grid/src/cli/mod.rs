@@ -8,6 +8,7 @@ mod rollout;
 mod solve;
 mod table;
 mod verify;
+mod verify_bench;
 
 use clap::{Parser, Subcommand};
 
@@ -41,6 +42,9 @@ enum Command {
     Verify(verify::Args),
     /// Merges the parts of a sharded `verify` into the verified bundle and the record a single run writes.
     VerifyMerge(verify::MergeArgs),
+    /// What a verification's rollouts cost per state and step, one state per call against batched on every
+    /// core, with the projected wall time of a row and a table; a record.
+    VerifyBench(verify_bench::Args),
     /// What adversarial planners sustain against grid solutions' own tracker policies (an independent check of
     /// their V_min by simulation), with a plot against beta and a record.
     Rollout(rollout::Args),
@@ -57,6 +61,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Compare(args) => compare::run(args),
         Command::Verify(args) => verify::run(args),
         Command::VerifyMerge(args) => verify::merge(args),
+        Command::VerifyBench(args) => verify_bench::run(args),
         Command::Rollout(args) => rollout::run(args),
         Command::Bench(args) => bench::run(args),
     }

@@ -3,7 +3,11 @@
 
 use super::common::command_line;
 use anyhow::Context;
-use fastrack_grid::verify::{apply_reports, required_samples, verify_rows, RowReport, VerifyOptions};
+use fastrack_grid::format;
+use fastrack_grid::solver::Solution;
+use fastrack_grid::verify::{
+    apply_reports, required_samples, verify_rows, Batching, RowReport, SearchOptions, Selection, VerifyOptions,
+};
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::manifest::Manifest;
 use fastrack_valuefn::record::{write_record, Table};
@@ -29,17 +33,32 @@ pub struct Args {
     #[arg(long)]
     out: PathBuf,
     /// Violation-probability bound epsilon.
-    #[arg(long, default_value_t = 0.05)]
-    eps: f64,
-    /// States are sampled in {V <= (1 + margin) level} (the level is V's minimum: its own sublevel set has
-    /// next to no volume).
-    #[arg(long, default_value_t = 0.1)]
-    level_margin: f64,
-    /// Largest number of uniform proposals per row for rejection sampling.
-    #[arg(long, default_value_t = 2_000_000)]
-    max_proposals: usize,
-    /// Confidence parameter delta.
     #[arg(long, default_value_t = 1e-3)]
+    eps: f64,
+    /// The first round samples states in {V <= (1 + margin) level} (the level is V's minimum: its own sublevel
+    /// set has next to no volume); later rounds sample under the largest error the previous one found.
+    #[arg(long, default_value_t = 0.05)]
+    level_margin: f64,
+    /// Largest number of rounds of the level correction.
+    #[arg(long, default_value_t = 8)]
+    max_rounds: usize,
+    /// A sample violates a round when its error exceeds (1 + slack) times the round's level (room for the
+    /// control held over each step).
+    #[arg(long, default_value_t = 0.02)]
+    slack: f64,
+    /// Largest number of uniform proposals per round for rejection sampling.
+    #[arg(long, default_value_t = 20_000_000)]
+    max_proposals: usize,
+    /// The first round samples under at least the level whose sublevel set holds this share of the proposal
+    /// box (from a pilot of proposals), so that a narrow learned minimum can be sampled (0: off).
+    #[arg(long, default_value_t = 5e-3)]
+    min_acceptance: f64,
+    /// Error coordinates of the proposals are drawn within this factor times the sampled level (0: the whole
+    /// state box); sampling stops with an error if the set reaches the narrowed edge.
+    #[arg(long, default_value_t = 2.5)]
+    proposal_box: f64,
+    /// Confidence parameter delta.
+    #[arg(long, default_value_t = 1e-6)]
     delta: f64,
     /// Rollout horizon (s).
     #[arg(long, default_value_t = 10.0)]
@@ -47,12 +66,45 @@ pub struct Args {
     /// RK4 step (s); control and planner are held over a step.
     #[arg(long, default_value_t = 0.01)]
     step: f64,
-    /// Random bang-bang planners per sample, besides the worst-case planner.
-    #[arg(long, default_value_t = 3)]
+    /// Random bang-bang planners per sample, besides the worst-case planners.
+    #[arg(long, default_value_t = 2)]
     random_planners: usize,
     /// Mean time between a random planner's switches (s).
     #[arg(long, default_value_t = 1.0)]
     mean_dwell: f64,
+    /// Grid solutions (.ftgrid, comma-separated) whose worst-case planners play the rows near their beta.
+    #[arg(long, value_delimiter = ',')]
+    grid_solutions: Vec<PathBuf>,
+    /// Largest distance in beta between a row and the grid solution that plays it.
+    #[arg(long, default_value_t = 0.05)]
+    grid_tolerance: f64,
+    /// Schedules per start and iteration of the cross-entropy search over planner schedules (0: no search).
+    #[arg(long, default_value_t = 16)]
+    search_population: usize,
+    /// Iterations of the search.
+    #[arg(long, default_value_t = 3)]
+    search_iterations: usize,
+    /// Elite schedules per start and iteration.
+    #[arg(long, default_value_t = 4)]
+    search_elites: usize,
+    /// How long each vertex of a searched schedule is held (s).
+    #[arg(long, default_value_t = 0.5)]
+    search_segment: f64,
+    /// Weight of the elites in each update of the search's probabilities.
+    #[arg(long, default_value_t = 0.7)]
+    search_smoothing: f64,
+    /// Samples whose error reached this share of the sampled level are searched.
+    #[arg(long, default_value_t = 0.9)]
+    search_threshold: f64,
+    /// Samples rolled out together; a round ends after the first batch with a violation.
+    #[arg(long, default_value_t = 4096)]
+    batch: usize,
+    /// Largest number of states per ONNX Runtime call.
+    #[arg(long, default_value_t = 4096)]
+    chunk: usize,
+    /// Evaluate and step the chunks in turn on one thread (one session) instead of on every core.
+    #[arg(long)]
+    sequential: bool,
     /// Only the rows with these betas (default: every row).
     #[arg(long, value_delimiter = ',')]
     betas: Vec<f64>,
@@ -114,7 +166,8 @@ fn load(path: &Path, ort_lib: Option<&Path>) -> anyhow::Result<Loaded> {
     let system = for_bundle(&manifest.system.id, manifest.n_params()).with_context(|| {
         format!("the bundle's system `{}` with {} parameters is unknown", manifest.system.id, manifest.n_params())
     })?;
-    let evaluator = Evaluator::new(runtime(ort_lib)?, &bundle.onnx, GraphDims::of(manifest), 1)?;
+    let sessions = rayon::current_num_threads();
+    let evaluator = Evaluator::new(runtime(ort_lib)?, &bundle.onnx, GraphDims::of(manifest), sessions)?;
     Ok(Loaded { bundle, system, evaluator })
 }
 
@@ -129,14 +182,33 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let options = VerifyOptions {
         eps: args.eps,
         level_margin: args.level_margin,
+        max_rounds: args.max_rounds,
+        slack: args.slack,
         max_proposals: args.max_proposals,
+        proposal_box: args.proposal_box,
+        min_acceptance: args.min_acceptance,
         delta: args.delta,
         horizon: args.horizon,
         step: args.step,
         random_planners: args.random_planners,
         mean_dwell: args.mean_dwell,
+        search: SearchOptions {
+            population: args.search_population,
+            iterations: args.search_iterations,
+            elites: args.search_elites,
+            segment: args.search_segment,
+            smoothing: args.search_smoothing,
+            threshold: args.search_threshold,
+        },
+        batch: args.batch,
+        batching: Batching { chunk: args.chunk, parallel: !args.sequential },
         seed: args.seed,
     };
+    let adversaries: Vec<Solution> = args
+        .grid_solutions
+        .iter()
+        .map(|p| format::load(p).with_context(|| format!("loading the grid solution {}", p.display())))
+        .collect::<anyhow::Result<_>>()?;
     println!(
         "N = ceil((2 / {}) (ln(1 / {}) + 1)) = {} samples per row",
         args.eps,
@@ -150,11 +222,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     let betas = (!args.betas.is_empty()).then_some(&args.betas[..]);
     let started = Instant::now();
-    let reports = verify_rows(&evaluator, &bundle.manifest, &system, betas, shard, &options, &bar)?;
+    let selection = Selection { betas, adversaries: &adversaries, grid_tolerance: args.grid_tolerance };
+    let reports = verify_rows(&evaluator, &bundle.manifest, &system, &selection, shard, &options, &bar)?;
     bar.finish_and_clear();
     let config = json!({ "bundle": args.bundle, "model": bundle.manifest.name, "version": bundle.manifest.version,
         "onnx_sha256": bundle.manifest.onnx_sha256, "untrained": bundle.manifest.untrained, "options": options,
-        "betas": args.betas });
+        "betas": args.betas, "grid_solutions": args.grid_solutions, "grid_tolerance": args.grid_tolerance,
+        "threads": rayon::current_num_threads() });
     if let Some(dir) = &args.part_dir {
         let part = Part { config, shard, wall_s: started.elapsed().as_secs_f64(), items: reports };
         let path = part.write(dir, PART_STEM).with_context(|| format!("writing the part into {}", dir.display()))?;
@@ -204,34 +278,52 @@ fn finish(
     let mut table = Table::new(&[
         "beta",
         "learned level",
+        "rounds",
         "sampled level",
         "verified level",
         "served level",
         "violations / N",
-        "worst-case planner max l",
-        "random planners max l",
+        "hardest planner",
+        "max l per planner",
+        "searched",
         "acceptance",
+        "wall (s)",
+        "rollout steps/s",
     ]);
     for r in &reports {
         let v = &r.verification;
         let served =
             manifest.teb_table.iter().find(|row| row.beta == r.beta).map_or(f64::NAN, |row| row.served_level());
+        let levels: Vec<String> = r.rounds.iter().map(|round| format!("{:.4}", round.level)).collect();
         println!(
-            "beta {:.4}: level {:.4} (sampled under {:.4}) -> verified {:.4} ({} of {} samples broke it)",
-            r.beta, r.level, r.sampled_level, v.verified_level, v.violations, v.samples
+            "beta {:.4}: level {:.4}, rounds at {} -> verified {:.4} ({} of {} samples broke the last), {:.0} s",
+            r.beta,
+            r.level,
+            levels.join(", "),
+            v.verified_level,
+            v.violations,
+            v.samples,
+            r.wall_s
         );
+        let per_planner: Vec<String> = v.planners.iter().map(|p| format!("{} {:.4}", p.family, p.max_error)).collect();
         table.row(vec![
             format!("{:.4}", r.beta),
             format!("{:.4}", r.level),
-            format!("{:.4}", r.sampled_level),
+            format!("{}", r.rounds.len()),
+            format!("{:.4}", r.sampled_level()),
             format!("{:.4}", v.verified_level),
             format!("{served:.4}"),
             format!("{} / {}", v.violations, v.samples),
-            format!("{:.4}", r.worst_case_max),
-            format!("{:.4}", r.random_max),
-            format!("{:.4}", r.acceptance),
+            v.hardest_planner().map_or_else(String::new, |p| p.family.clone()),
+            per_planner.join("; "),
+            format!("{}", r.searched),
+            format!("{:.4}", r.rounds.last().map_or(f64::NAN, |round| round.acceptance)),
+            format!("{:.1}", r.wall_s),
+            format!("{:.0}", r.rollout_steps as f64 / r.wall_s.max(1e-9)),
         ]);
     }
+    let wall: f64 = reports.iter().map(|r| r.wall_s).sum();
+    println!("{} rows in {wall:.0} s", reports.len());
     let broken = reports.iter().filter(|r| r.verification.violations > 0).count();
     println!("{broken} of {} rows had violations", reports.len());
     let name = outputs.record.map_or_else(|| format!("grid-verify-{}", manifest.name), str::to_string);
@@ -240,7 +332,7 @@ fn finish(
         &name,
         &command_line(),
         config,
-        json!({ "rows": reports, "rows_with_violations": broken }),
+        json!({ "rows": reports, "rows_with_violations": broken, "wall_s": wall }),
         &[("verification", &table)],
     )?;
     println!("wrote {}", path.display());

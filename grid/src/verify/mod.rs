@@ -1,0 +1,641 @@
+//! Scenario verification of a bundle's TEB table (after Lin & Bansal's verification of DeepReach), with their
+//! iterated level correction.
+//!
+//! For each row, a round samples `N` states uniformly from the learned sublevel set `{V <= c}` by rejection
+//! ([`sampling`]) and rolls each out (RK4, fixed step, control and planner held over each step, [`batch`]) with
+//! the served tracker control against every planner family: the worst-case planner of the model's own
+//! gradient, the worst-case planner of a grid solution's gradient (where one is given near the row's `beta`),
+//! random bang-bang planners, and a cross-entropy search over planner schedules ([`search`]) for the samples
+//! the others pushed near the level. A sample *violates* the round when its error exceeds `(1 + slack) c`. The
+//! first
+//! round samples under `(1 + margin) level`; a round with a violation ends there, the level is raised to the
+//! largest error seen, and the next round samples afresh, until a round rolls out all `N` samples without a
+//! violation. A row whose rounds run out, or whose raised level would take the set past the trained domain's
+//! error coordinates, is not verified: its violations stay in the report and in the manifest.
+//!
+//! With `N >= (2 / eps) (ln(1 / delta) + 1)` samples in the final round, the largest error over them bounds the
+//! error from all but an `eps` fraction (by measure) of `{V <= c}`, with confidence `1 - delta` (scenario
+//! approach, one decision variable: the level), for these planner families and this horizon; it is at most
+//! `(1 + slack) c`.
+
+mod batch;
+mod sampling;
+mod search;
+
+pub use batch::Batching;
+pub use search::SearchOptions;
+
+use crate::solver::Solution;
+use batch::{Gradient, Rollout, Scene};
+use fastrack_valuefn::manifest::{Manifest, PlannerResult, TebRow, Verification};
+use fastrack_valuefn::runtime::{Evaluator, RuntimeError};
+use fastrack_valuefn::shard::Shard;
+use fastrack_valuefn::simulation::Planner;
+use fastrack_valuefn::system::AffineSystem;
+use fastrack_valuefn::teb::{reshape_at_served_levels, TebOptions};
+use indicatif::ProgressBar;
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use sampling::SublevelSampler;
+use serde::{Deserialize, Serialize};
+use std::time::Instant;
+
+/// Smallest raise of the level between rounds, as a share of it (so rounds make progress).
+const MIN_RAISE: f64 = 0.005;
+
+/// How to verify.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct VerifyOptions {
+    /// Violation-probability bound epsilon.
+    pub eps: f64,
+    /// The first round samples `{V <= (1 + level_margin) level}`.
+    pub level_margin: f64,
+    /// Confidence parameter delta.
+    pub delta: f64,
+    /// Largest number of rounds of the level correction.
+    pub max_rounds: usize,
+    /// A sample violates a round when its error exceeds `(1 + slack)` times the round's level: room for a
+    /// control held over each step, which lets the error creep slightly past a continuous-time bound.
+    pub slack: f64,
+    /// Rollout horizon (s).
+    pub horizon: f64,
+    /// RK4 step; the control and the planner are held over a step (s).
+    pub step: f64,
+    /// Random bang-bang planners per sample (besides the worst-case planners).
+    pub random_planners: usize,
+    /// Mean time between a random planner's switches (s).
+    pub mean_dwell: f64,
+    /// The cross-entropy search over planner schedules.
+    pub search: SearchOptions,
+    /// Samples rolled out together (each round checks for violations after every such batch).
+    pub batch: usize,
+    /// How the rollouts are fed to ONNX Runtime.
+    pub batching: Batching,
+    /// Error coordinates of the proposals are drawn within `proposal_box` times the sampled level (0: the
+    /// whole state box).
+    pub proposal_box: f64,
+    /// Largest number of proposals per round before giving up on rejection sampling.
+    pub max_proposals: usize,
+    /// The first round samples under at least the level whose sublevel set holds this share of the proposal
+    /// box (measured on a pilot of proposals), so that a narrow minimum can be sampled; 0 keeps
+    /// `(1 + level_margin) level`.
+    pub min_acceptance: f64,
+    /// Random seed.
+    pub seed: u64,
+}
+
+impl Default for VerifyOptions {
+    fn default() -> Self {
+        Self {
+            eps: 1e-3,
+            level_margin: 0.05,
+            delta: 1e-6,
+            max_rounds: 8,
+            slack: 0.02,
+            horizon: 10.0,
+            step: 0.01,
+            random_planners: 2,
+            mean_dwell: 1.0,
+            search: SearchOptions::default(),
+            batch: 4096,
+            batching: Batching::default(),
+            proposal_box: 2.5,
+            max_proposals: 20_000_000,
+            min_acceptance: 5e-3,
+            seed: 11,
+        }
+    }
+}
+
+/// Samples needed for `eps` and `delta`: `ceil((2 / eps) (ln(1 / delta) + 1))`.
+pub fn required_samples(eps: f64, delta: f64) -> usize {
+    ((2.0 / eps) * ((1.0 / delta).ln() + 1.0)).ceil() as usize
+}
+
+/// Why a verification could not run.
+#[derive(Debug, thiserror::Error)]
+pub enum VerifyError {
+    /// A setting is out of range.
+    #[error("{0}")]
+    Setting(String),
+    /// The error sets at the served levels could not be measured.
+    #[error("measuring the error set at the served level: {0}")]
+    Shape(String),
+    /// The bundle's system is not the one given.
+    #[error("the bundle is for system `{bundle}`, not `{system}`")]
+    System {
+        /// In the manifest.
+        bundle: String,
+        /// Given.
+        system: String,
+    },
+    /// Rejection sampling found too few states in the sublevel set.
+    #[error(
+        "beta {beta}: only {accepted} of {proposed} uniform states satisfy V <= {level}; the sublevel set is too small to sample (raise --level-margin or --max-proposals, or check the table)"
+    )]
+    Sampling {
+        /// Row.
+        beta: f64,
+        /// Its level.
+        level: f64,
+        /// Accepted states.
+        accepted: usize,
+        /// Proposals drawn.
+        proposed: usize,
+    },
+    /// ONNX Runtime failed.
+    #[error(transparent)]
+    Runtime(#[from] RuntimeError),
+}
+
+/// A planner family of the verification.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Family {
+    /// The worst case of the model's own gradient.
+    ModelWorstCase,
+    /// The worst case of a grid solution's gradient.
+    GridWorstCase,
+    /// Random bang-bang planners.
+    RandomBangBang,
+    /// The cross-entropy search over planner schedules.
+    Search,
+}
+
+impl Family {
+    /// Every family, in report order.
+    pub const ALL: [Family; 4] =
+        [Family::ModelWorstCase, Family::GridWorstCase, Family::RandomBangBang, Family::Search];
+
+    /// Its name in records and manifests.
+    pub fn name(self) -> &'static str {
+        match self {
+            Family::ModelWorstCase => "model-worst-case",
+            Family::GridWorstCase => "grid-worst-case",
+            Family::RandomBangBang => "random-bang-bang",
+            Family::Search => "search",
+        }
+    }
+}
+
+/// One round of the level correction.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RoundReport {
+    /// The level the round sampled under.
+    pub level: f64,
+    /// Samples rolled out before the round ended.
+    pub samples: usize,
+    /// Those whose error exceeded `(1 + slack)` times the level.
+    pub violations: usize,
+    /// The largest error reached.
+    pub max_error: f64,
+    /// Share of the proposals accepted by rejection sampling.
+    pub acceptance: f64,
+}
+
+/// How the level correction of a row ended.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Outcome {
+    /// A round rolled out every sample without a violation: the row is verified.
+    Verified,
+    /// Every round had a violation.
+    RoundsExhausted,
+    /// The raised level would take the sampled set past the trained domain's error coordinates, where the model
+    /// is extrapolated: the row cannot be verified at any level inside it.
+    LeftDomain,
+}
+
+/// The result for one TEB row.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct RowReport {
+    /// Planner speed bound.
+    pub beta: f64,
+    /// The row's learned level.
+    pub level: f64,
+    /// Every round, the last one the certificate.
+    pub rounds: Vec<RoundReport>,
+    /// How the correction ended.
+    pub outcome: Outcome,
+    /// What was written into the row.
+    pub verification: Verification,
+    /// The `beta` of the grid solution whose worst-case planner played, if one did.
+    pub grid_beta: Option<f64>,
+    /// Samples of the final round the search ran on.
+    pub searched: usize,
+    /// Rollout steps taken over all rounds (states times steps, the search's included).
+    pub rollout_steps: u64,
+    /// Wall time of the row (s).
+    pub wall_s: f64,
+}
+
+impl RowReport {
+    /// The level the final round sampled under.
+    pub fn sampled_level(&self) -> f64 {
+        self.rounds.last().map_or(f64::NAN, |r| r.level)
+    }
+}
+
+fn check(options: &VerifyOptions) -> Result<(), VerifyError> {
+    let ok = |x: f64| x.is_finite() && x > 0.0;
+    if !(ok(options.eps) && options.eps < 1.0 && ok(options.delta) && options.delta < 1.0) {
+        return Err(VerifyError::Setting(format!(
+            "eps = {} and delta = {} must lie in (0, 1)",
+            options.eps, options.delta
+        )));
+    }
+    if !(options.level_margin.is_finite() && options.level_margin >= 0.0) {
+        return Err(VerifyError::Setting(format!("level margin = {} must be >= 0", options.level_margin)));
+    }
+    if !(ok(options.horizon) && ok(options.step) && options.step <= options.horizon && ok(options.mean_dwell)) {
+        return Err(VerifyError::Setting(format!(
+            "horizon = {}, step = {} and mean dwell = {} must be positive with step <= horizon",
+            options.horizon, options.step, options.mean_dwell
+        )));
+    }
+    if !(options.slack.is_finite() && options.slack >= 0.0) {
+        return Err(VerifyError::Setting(format!("slack = {} must be >= 0", options.slack)));
+    }
+    if options.max_rounds == 0 || options.batch == 0 {
+        return Err(VerifyError::Setting(format!(
+            "max rounds = {} and batch = {} must be at least 1",
+            options.max_rounds, options.batch
+        )));
+    }
+    if !(0.0..1.0).contains(&options.min_acceptance) {
+        return Err(VerifyError::Setting(format!("min acceptance = {} must lie in [0, 1)", options.min_acceptance)));
+    }
+    if !(options.proposal_box.is_finite() && (options.proposal_box == 0.0 || options.proposal_box >= 1.0)) {
+        return Err(VerifyError::Setting(format!(
+            "proposal box = {} must be 0 (the whole box) or at least 1",
+            options.proposal_box
+        )));
+    }
+    options.search.check()
+}
+
+/// The grid solution among `adversaries` nearest the row's `beta`, if one lies within `tolerance` of it.
+pub fn nearest_adversary(adversaries: &[Solution], beta: f64, tolerance: f64) -> Option<&Solution> {
+    adversaries
+        .iter()
+        .filter(|s| s.info.params.iter().all(|&p| (p - beta).abs() <= tolerance))
+        .min_by(|a, b| (a.info.params[0] - beta).abs().total_cmp(&(b.info.params[0] - beta).abs()))
+}
+
+/// The largest error per family and the rollouts each played, accumulated over a round.
+#[derive(Default)]
+struct FamilyTally {
+    max_error: [f64; 4],
+    rollouts: [usize; 4],
+}
+
+impl FamilyTally {
+    fn add(&mut self, family: Family, error: f64) {
+        let i = family as usize;
+        self.max_error[i] = self.max_error[i].max(error);
+        self.rollouts[i] += 1;
+    }
+
+    fn results(&self) -> Vec<PlannerResult> {
+        Family::ALL
+            .iter()
+            .filter(|&&f| self.rollouts[f as usize] > 0)
+            .map(|&f| PlannerResult {
+                family: f.name().into(),
+                rollouts: self.rollouts[f as usize],
+                max_error: self.max_error[f as usize],
+            })
+            .collect()
+    }
+}
+
+/// What a round found.
+struct Round {
+    report: RoundReport,
+    tally: FamilyTally,
+    searched: usize,
+    rollout_steps: u64,
+}
+
+/// One round at `level`: batches of samples rolled out until `n` are done or a batch has a violation.
+fn run_round(
+    scene: &Scene<'_>,
+    sampler: &mut SublevelSampler<'_>,
+    n: usize,
+    options: &VerifyOptions,
+    rng: &mut StdRng,
+) -> Result<Round, VerifyError> {
+    let system = scene.system;
+    let n_state = system.n_state();
+    let level = sampler.level();
+    let steps_per_rollout = (options.horizon / options.step).round().max(1.0) as u64;
+    let mut families = vec![Family::ModelWorstCase];
+    if scene.grid.is_some() {
+        families.push(Family::GridWorstCase);
+    }
+    families.extend(std::iter::repeat_n(Family::RandomBangBang, options.random_planners));
+    let (mut done, mut violations, mut max_error, mut searched, mut rollout_steps) = (0, 0, 0.0f64, 0, 0u64);
+    let mut tally = FamilyTally::default();
+    while done < n && violations == 0 {
+        let count = options.batch.min(n - done);
+        let samples = sampler.draw(count, rng)?;
+        let mut rollouts = Vec::with_capacity(count * families.len());
+        for state in samples.chunks(n_state) {
+            for &family in &families {
+                let (planner, gradient) = match family {
+                    Family::GridWorstCase => (Planner::WorstCase, Gradient::Grid),
+                    Family::RandomBangBang => (Planner::bang_bang(), Gradient::Model),
+                    _ => (Planner::WorstCase, Gradient::Model),
+                };
+                rollouts.push(Rollout::new(system, state, planner, gradient, StdRng::seed_from_u64(rng.random())));
+            }
+        }
+        scene.roll_out(&mut rollouts)?;
+        rollout_steps += rollouts.len() as u64 * steps_per_rollout;
+        let mut errors: Vec<f64> = rollouts
+            .chunks(families.len())
+            .map(|per_sample| {
+                for (r, &family) in per_sample.iter().zip(&families) {
+                    tally.add(family, r.max_error);
+                }
+                per_sample.iter().map(|r| r.max_error).fold(0.0, f64::max)
+            })
+            .collect();
+        if options.search.enabled() {
+            let chosen: Vec<usize> = (0..count).filter(|&j| errors[j] >= options.search.threshold * level).collect();
+            let starts: Vec<f64> =
+                chosen.iter().flat_map(|&j| samples[j * n_state..(j + 1) * n_state].to_vec()).collect();
+            let found = search::search(scene, &starts, &options.search, rng)?;
+            for (&j, &e) in chosen.iter().zip(&found) {
+                tally.add(Family::Search, e);
+                errors[j] = errors[j].max(e);
+            }
+            searched += chosen.len();
+            rollout_steps +=
+                (chosen.len() * options.search.population * options.search.iterations) as u64 * steps_per_rollout;
+        }
+        violations += errors.iter().filter(|&&e| e > (1.0 + options.slack) * level).count();
+        max_error = errors.iter().copied().fold(max_error, f64::max);
+        done += count;
+    }
+    Ok(Round {
+        report: RoundReport { level, samples: done, violations, max_error, acceptance: sampler.acceptance() },
+        tally,
+        searched,
+        rollout_steps,
+    })
+}
+
+/// Verifies one row with the iterated level correction and returns the report (the row itself is not
+/// modified). `grid` is the grid solution whose worst-case planner plays, if any.
+pub fn verify_row(
+    evaluator: &Evaluator,
+    manifest: &Manifest,
+    system: &AffineSystem,
+    row: &TebRow,
+    grid: Option<&Solution>,
+    options: &VerifyOptions,
+) -> Result<RowReport, VerifyError> {
+    check(options)?;
+    if manifest.system.id != system.id {
+        return Err(VerifyError::System { bundle: manifest.system.id.clone(), system: system.id.into() });
+    }
+    if let Some(g) = grid {
+        if g.info.system != system.id || g.grid.ndim() != system.n_state() {
+            return Err(VerifyError::System { bundle: g.info.system.clone(), system: system.id.into() });
+        }
+    }
+    let started = Instant::now();
+    let mut rng = StdRng::seed_from_u64(options.seed ^ row.beta.to_bits());
+    let params = vec![row.beta; system.n_params()];
+    let n = required_samples(options.eps, options.delta);
+    let scene = Scene {
+        evaluator,
+        system,
+        params: &params,
+        grid,
+        horizon: options.horizon,
+        step: options.step,
+        mean_dwell: options.mean_dwell,
+        batching: options.batching,
+    };
+    let mut level = row.level * (1.0 + options.level_margin);
+    if options.min_acceptance > 0.0 {
+        let sampler = SublevelSampler::new(evaluator, manifest, system, &params, level, options.proposal_box, 0);
+        level = level.max(sampler.quantile_level(options.min_acceptance, &mut rng)?);
+    }
+    let (mut rounds, mut rollout_steps) = (Vec::new(), 0u64);
+    // The error coordinates' reach inside the trained domain: a set past it is extrapolated.
+    let reach = system
+        .error_coords
+        .iter()
+        .map(|&i| manifest.state[i].min.abs().min(manifest.state[i].max.abs()))
+        .fold(f64::INFINITY, f64::min);
+    let (last, outcome) = loop {
+        let mut sampler = SublevelSampler::new(
+            evaluator,
+            manifest,
+            system,
+            &params,
+            level,
+            options.proposal_box,
+            options.max_proposals,
+        );
+        let round = run_round(&scene, &mut sampler, n, options, &mut rng)?;
+        tracing::info!(
+            beta = row.beta,
+            level,
+            violations = round.report.violations,
+            max_error = round.report.max_error,
+            "round"
+        );
+        rollout_steps += round.rollout_steps;
+        rounds.push(round.report.clone());
+        if round.report.violations == 0 {
+            break (round, Outcome::Verified);
+        }
+        if rounds.len() >= options.max_rounds {
+            break (round, Outcome::RoundsExhausted);
+        }
+        level = round.report.max_error.max(level * (1.0 + MIN_RAISE));
+        if level > reach {
+            break (round, Outcome::LeftDomain);
+        }
+    };
+    Ok(RowReport {
+        beta: row.beta,
+        level: row.level,
+        verification: Verification {
+            verified_level: last.report.max_error,
+            eps: options.eps,
+            delta: options.delta,
+            samples: last.report.samples,
+            violations: last.report.violations,
+            horizon: options.horizon,
+            step: options.step,
+            sampled_level: Some(last.report.level),
+            rounds: rounds.len(),
+            planners: last.tally.results(),
+        },
+        rounds,
+        outcome,
+        grid_beta: grid.map(|g| g.info.params[0]),
+        searched: last.searched,
+        rollout_steps,
+        wall_s: started.elapsed().as_secs_f64(),
+    })
+}
+
+/// Which rows to verify and the grid solutions whose worst-case planners play.
+#[derive(Debug, Clone, Copy, Default)]
+pub struct Selection<'a> {
+    /// Only the rows with these `beta` (every row when `None`).
+    pub betas: Option<&'a [f64]>,
+    /// Grid solutions; each row is played by the one nearest its `beta` within `grid_tolerance`.
+    pub adversaries: &'a [Solution],
+    /// Largest distance in `beta` between a row and the grid solution that plays it.
+    pub grid_tolerance: f64,
+}
+
+/// Verifies the rows of `manifest` the selection names, writing each
+/// result into its row's `verification` (raised where needed to keep served levels monotone in `beta`) and
+/// every row's extent and boundary radii at its served level; returns the reports (raw maxima) in row order.
+pub fn verify_table(
+    evaluator: &Evaluator,
+    manifest: &mut Manifest,
+    system: &AffineSystem,
+    selection: &Selection<'_>,
+    options: &VerifyOptions,
+    progress: &ProgressBar,
+) -> Result<Vec<RowReport>, VerifyError> {
+    let reports = verify_rows(evaluator, manifest, system, selection, Shard::WHOLE, options, progress)?;
+    apply_reports(evaluator, manifest, system, &reports)?;
+    Ok(reports)
+}
+
+/// Verifies this shard's share of the rows of `manifest` the selection names,
+/// without changing the manifest: the `i`-th selected row belongs to shard `i % count`. Each row's samples
+/// are seeded by the options' seed and the row's `beta` alone, so shards give the reports a single run gives.
+pub fn verify_rows(
+    evaluator: &Evaluator,
+    manifest: &Manifest,
+    system: &AffineSystem,
+    selection: &Selection<'_>,
+    shard: Shard,
+    options: &VerifyOptions,
+    progress: &ProgressBar,
+) -> Result<Vec<RowReport>, VerifyError> {
+    let selected: Vec<usize> = (0..manifest.teb_table.len())
+        .filter(|&i| selection.betas.is_none_or(|b| b.iter().any(|&x| (x - manifest.teb_table[i].beta).abs() < 1e-9)))
+        .collect();
+    if selected.is_empty() {
+        return Err(VerifyError::Setting(format!("no TEB row has a beta in {:?}", selection.betas)));
+    }
+    let mine: Vec<usize> =
+        selected.iter().enumerate().filter(|(position, _)| shard.takes(*position)).map(|(_, &i)| i).collect();
+    progress.set_length(mine.len() as u64);
+    let mut reports = Vec::with_capacity(mine.len());
+    for i in mine {
+        let row = &manifest.teb_table[i];
+        let grid = nearest_adversary(selection.adversaries, row.beta, selection.grid_tolerance);
+        let report = verify_row(evaluator, manifest, system, row, grid, options)?;
+        tracing::info!(
+            beta = report.beta,
+            level = report.level,
+            verified = report.verification.verified_level,
+            violations = report.verification.violations,
+            rounds = report.rounds.len(),
+            "row verified"
+        );
+        reports.push(report);
+        progress.inc(1);
+    }
+    Ok(reports)
+}
+
+/// Writes `reports` into their rows of `manifest` (matched by `beta`), keeps the served levels monotone in
+/// `beta`, and reshapes every row's extent and boundary radii at its served level.
+pub fn apply_reports(
+    evaluator: &Evaluator,
+    manifest: &mut Manifest,
+    system: &AffineSystem,
+    reports: &[RowReport],
+) -> Result<(), VerifyError> {
+    for report in reports {
+        let row =
+            manifest.teb_table.iter_mut().find(|row| row.beta == report.beta).ok_or_else(|| {
+                VerifyError::Setting(format!("the table has no row with beta {} to verify", report.beta))
+            })?;
+        row.verification = Some(report.verification.clone());
+    }
+    monotone_envelope(manifest)?;
+    reshape_at_served_levels(evaluator, system, &mut manifest.teb_table, &TebOptions::default())
+        .map_err(VerifyError::Shape)
+}
+
+/// Keeps served levels monotone in `beta` (the manifest's invariant): a verified row serves at least what
+/// every row below it serves. An unverified row that would then serve less than a row below it is an error:
+/// verify the rows above a raised one too.
+fn monotone_envelope(manifest: &mut Manifest) -> Result<(), VerifyError> {
+    let mut floor = 0.0f64;
+    for row in &mut manifest.teb_table {
+        if let Some(v) = &mut row.verification {
+            v.verified_level = v.verified_level.max(floor);
+        } else if row.level < floor {
+            return Err(VerifyError::Setting(format!(
+                "row beta {} (level {}) is below the verified level {floor} of a smaller beta: verify it as well",
+                row.beta, row.level
+            )));
+        }
+        floor = floor.max(row.served_level());
+    }
+    Ok(())
+}
+
+/// A measurement of rollout speed: `states` rollouts of `steps` steps of `step` seconds at `beta`, fed to ONNX
+/// Runtime as `batching` says.
+#[derive(Debug, Clone, Copy)]
+pub struct RateProbe {
+    /// Planner speed bound.
+    pub beta: f64,
+    /// Rollouts.
+    pub states: usize,
+    /// Steps per rollout.
+    pub steps: usize,
+    /// RK4 step (s).
+    pub step: f64,
+    /// How the states are fed.
+    pub batching: Batching,
+}
+
+/// Rollout steps per second (states times steps over wall time) of the probe's rollouts, from states drawn
+/// uniformly over the manifest's box, against the model's worst-case planner: what a verification's rollouts
+/// cost per state and step.
+pub fn rollout_rate(
+    evaluator: &Evaluator,
+    manifest: &Manifest,
+    system: &AffineSystem,
+    probe: &RateProbe,
+) -> Result<f64, VerifyError> {
+    let mut rng = StdRng::seed_from_u64(7);
+    let params = vec![probe.beta; system.n_params()];
+    let mut rollouts: Vec<Rollout> = (0..probe.states)
+        .map(|_| {
+            let state: Vec<f64> = manifest.state.iter().map(|d| rng.random_range(d.min..=d.max)).collect();
+            Rollout::new(system, &state, Planner::WorstCase, Gradient::Model, StdRng::seed_from_u64(0))
+        })
+        .collect();
+    let scene = Scene {
+        evaluator,
+        system,
+        params: &params,
+        grid: None,
+        horizon: probe.steps as f64 * probe.step,
+        step: probe.step,
+        mean_dwell: 1.0,
+        batching: probe.batching,
+    };
+    let started = Instant::now();
+    scene.roll_out(&mut rollouts)?;
+    Ok((probe.states * probe.steps) as f64 / started.elapsed().as_secs_f64())
+}
