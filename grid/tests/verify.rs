@@ -172,7 +172,7 @@ fn shipped_settings() -> VerifyOptions {
         step: 0.02,
         slack: 0.04,
         random_planners: 1,
-        search: SearchOptions { threshold: 0.97, ..SearchOptions::default() },
+        search: SearchOptions::default(),
         batch: 8192,
         ..VerifyOptions::default()
     }
@@ -341,7 +341,7 @@ fn the_search_forces_larger_errors_than_random_planners_on_a_weak_control() {
         horizon: 4.0,
         step: 0.02,
         random_planners: 4,
-        search: SearchOptions { threshold: 0.0, ..SearchOptions::default() },
+        search: SearchOptions { per_batch: 1000, ..SearchOptions::default() },
         ..VerifyOptions::default()
     };
     let mut manifest = bundle.manifest.clone();

@@ -74,6 +74,7 @@ fn verification(v: &fastrack_valuefn::manifest::Verification) -> pb::Verificatio
         violations: v.violations as u64,
         rounds: v.rounds as u32,
         sampled_level: v.sampled_level,
+        correction: v.correction.clone().unwrap_or_default(),
         horizon: v.horizon,
         step: v.step,
         planners: v

@@ -1,16 +1,19 @@
 //! The grid tools on a trained diagonal-mode bundle (one shared `beta`, the dubins4d default): `fastrack-trainer`
 //! trains and exports a tiny dubins4d run, then `fastrack-grid compare` and `verify` (the binaries) read it
-//! against the full two-parameter system they solve and simulate.
+//! against the full two-parameter system they solve and simulate, and the server describes the verified
+//! bundle with every figure of its verification.
 
-use fastrack_e2e::{run_binary as run, tiny_training_config};
+use fastrack_client::model_ref;
+use fastrack_e2e::{run_binary as run, tiny_training_config, TestServer};
+use fastrack_valuefn::bundle::Bundle;
 use std::path::Path;
 
 fn path(p: &Path) -> &str {
     p.to_str().unwrap()
 }
 
-#[test]
-fn compare_and_verify_read_a_diagonal_bundle() {
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn compare_and_verify_read_a_diagonal_bundle() {
     let work = tempfile::tempdir().unwrap();
     let (config, run_dir, repo, results) =
         (work.path().join("tiny.toml"), work.path().join("run"), work.path().join("repo"), work.path().join("results"));
@@ -42,6 +45,31 @@ fn compare_and_verify_read_a_diagonal_bundle() {
         path(&results)
     );
     run("fastrack-grid", &verify.split_whitespace().collect::<Vec<_>>());
-    let manifest = std::fs::read_to_string(verified.join("tiny-d4").join("1").join("manifest.json")).unwrap();
-    assert!(manifest.contains("verified_level"), "the verified bundle carries verified levels");
+    let manifest = Bundle::load(&verified.join("tiny-d4").join("1")).unwrap().manifest;
+    assert!(manifest.teb_table.iter().all(|row| row.verification.is_some()), "every row is verified");
+
+    // GetModel serves every figure of each row's verification, as the manifest holds it.
+    let (_server, client) = TestServer::start_serving(&verified).await;
+    let info = client.get_model(model_ref("tiny-d4", 1)).await.unwrap();
+    assert_eq!(info.teb_table.len(), manifest.teb_table.len());
+    for (served, row) in info.teb_table.iter().zip(&manifest.teb_table) {
+        let (got, want) =
+            (served.verification.as_ref().expect("a verification per row"), row.verification.as_ref().unwrap());
+        assert_eq!(served.verified_level, Some(want.verified_level));
+        assert_eq!((got.verified_level, got.eps, got.delta), (want.verified_level, 0.5, 0.5));
+        assert_eq!((got.samples, got.violations), (want.samples as u64, want.violations as u64));
+        assert_eq!((got.rounds as usize, got.horizon, got.step), (want.rounds, 0.1, want.step));
+        assert!(got.rounds >= 1 && got.samples == 7, "{got:?}");
+        assert_eq!(got.sampled_level, want.sampled_level);
+        assert!(got.sampled_level.is_some());
+        assert_eq!(got.correction, "set");
+        let families: Vec<&str> = got.planners.iter().map(|p| p.family.as_str()).collect();
+        assert_eq!(families, ["model-worst-case", "search"], "no random planners were asked for");
+        for (g, w) in got.planners.iter().zip(&want.planners) {
+            assert_eq!(
+                (g.family.as_str(), g.rollouts, g.max_error),
+                (w.family.as_str(), w.rollouts as u64, w.max_error)
+            );
+        }
+    }
 }

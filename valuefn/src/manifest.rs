@@ -182,6 +182,10 @@ pub struct Verification {
     /// the iterated correction).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sampled_level: Option<f64>,
+    /// What the correction raised: `set` (the sampled set with the level: the set holds its own level) or
+    /// `bound` (only the bound on the error from the first round's set); absent without the correction.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub correction: Option<String>,
     /// Rounds of the iterated level correction (1: the first sampled level held).
     #[serde(default = "one_round")]
     pub rounds: usize,

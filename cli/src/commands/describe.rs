@@ -101,21 +101,22 @@ fn model_text(m: &pb::ModelInfo) -> String {
 
 fn verification_json(v: &pb::Verification) -> Value {
     json!({"eps": v.eps, "delta": v.delta, "samples": v.samples, "violations": v.violations, "rounds": v.rounds,
-        "sampled_level": v.sampled_level, "horizon": v.horizon, "step": v.step,
+        "sampled_level": v.sampled_level, "correction": v.correction, "horizon": v.horizon, "step": v.step,
         "planners": v.planners.iter().map(|p| json!({"family": p.family, "rollouts": p.rollouts,
             "max_error": p.max_error})).collect::<Vec<_>>()})
 }
 
-/// `eps 0.001, delta 1e-6, N 29632, 0 violations, 2 rounds, 10 s; hardest model-worst-case`.
+/// `eps 0.001, delta 1e-6, N 29632, 0 violations, 2 rounds (set), 10 s; hardest model-worst-case`.
 fn verification_text(v: &pb::Verification) -> String {
     let hardest = v.planners.iter().max_by(|a, b| a.max_error.total_cmp(&b.max_error));
     format!(
-        "eps {}, delta {}, N {}, {} violations, {} rounds, {} s{}",
+        "eps {}, delta {}, N {}, {} violations, {} rounds{}, {} s{}",
         v.eps,
         v.delta,
         v.samples,
         v.violations,
         v.rounds,
+        if v.correction.is_empty() { String::new() } else { format!(" ({})", v.correction) },
         v.horizon,
         hardest.map_or(String::new(), |p| format!("; hardest {}", p.family))
     )

@@ -6,7 +6,8 @@ use anyhow::Context;
 use fastrack_grid::format;
 use fastrack_grid::solver::Solution;
 use fastrack_grid::verify::{
-    apply_reports, required_samples, verify_rows, Batching, RowReport, SearchOptions, Selection, VerifyOptions,
+    apply_reports, required_samples, verify_rows, Batching, Correction, RowReport, SearchOptions, Selection,
+    VerifyOptions,
 };
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::manifest::Manifest;
@@ -42,6 +43,10 @@ pub struct Args {
     /// Largest number of rounds of the level correction.
     #[arg(long, default_value_t = 8)]
     max_rounds: usize,
+    /// What a round with a violation raises: `set` (the next round samples {V <= c} at the raised c: the set
+    /// must hold its own level) or `bound` (every round samples the first round's set; only the bound rises).
+    #[arg(long, value_enum, default_value_t = Correction::Set)]
+    correction: Correction,
     /// A sample violates a round when its error exceeds (1 + slack) times the round's level (room for the
     /// control held over each step).
     #[arg(long, default_value_t = 0.02)]
@@ -93,9 +98,9 @@ pub struct Args {
     /// Weight of the elites in each update of the search's probabilities.
     #[arg(long, default_value_t = 0.7)]
     search_smoothing: f64,
-    /// Samples whose error reached this share of the sampled level are searched.
-    #[arg(long, default_value_t = 0.9)]
-    search_threshold: f64,
+    /// Samples searched per batch: those the other planner families pushed furthest.
+    #[arg(long, default_value_t = 64)]
+    search_per_batch: usize,
     /// Samples rolled out together; a round ends after the first batch with a violation.
     #[arg(long, default_value_t = 4096)]
     batch: usize,
@@ -183,6 +188,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         eps: args.eps,
         level_margin: args.level_margin,
         max_rounds: args.max_rounds,
+        correction: args.correction,
         slack: args.slack,
         max_proposals: args.max_proposals,
         proposal_box: args.proposal_box,
@@ -198,7 +204,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             elites: args.search_elites,
             segment: args.search_segment,
             smoothing: args.search_smoothing,
-            threshold: args.search_threshold,
+            per_batch: args.search_per_batch,
         },
         batch: args.batch,
         batching: Batching { chunk: args.chunk, parallel: !args.sequential },

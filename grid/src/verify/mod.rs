@@ -5,18 +5,21 @@
 //! ([`sampling`]) and rolls each out (RK4, fixed step, control and planner held over each step, [`batch`]) with
 //! the served tracker control against every planner family: the worst-case planner of the model's own
 //! gradient, the worst-case planner of a grid solution's gradient (where one is given near the row's `beta`),
-//! random bang-bang planners, and a cross-entropy search over planner schedules ([`search`]) for the samples
-//! the others pushed near the level. A sample *violates* the round when its error exceeds `(1 + slack) c`. The
+//! random bang-bang planners, and a cross-entropy search over planner schedules ([`search`]) from the samples
+//! of each batch the others pushed furthest. A sample *violates* the round when its error exceeds `(1 + slack) c`. The
 //! first
 //! round samples under `(1 + margin) level`; a round with a violation ends there, the level is raised to the
 //! largest error seen, and the next round samples afresh, until a round rolls out all `N` samples without a
 //! violation. A row whose rounds run out, or whose raised level would take the set past the trained domain's
-//! error coordinates, is not verified: its violations stay in the report and in the manifest.
+//! error coordinates, is not verified: its violations stay in the report and in the manifest. That is the
+//! [`Correction::Set`] correction; [`Correction::Bound`] keeps sampling the first round's set and raises only
+//! the bound the errors are checked against.
 //!
 //! With `N >= (2 / eps) (ln(1 / delta) + 1)` samples in the final round, the largest error over them bounds the
 //! error from all but an `eps` fraction (by measure) of `{V <= c}`, with confidence `1 - delta` (scenario
 //! approach, one decision variable: the level), for these planner families and this horizon; it is at most
-//! `(1 + slack) c`.
+//! `(1 + slack) c`. The search only adds evidence: it can raise the largest error, never lower it, and the
+//! samples it starts from are chosen by the other families' errors, so the guarantee is stated for them.
 
 mod batch;
 mod sampling;
@@ -43,6 +46,28 @@ use std::time::Instant;
 /// Smallest raise of the level between rounds, as a share of it (so rounds make progress).
 const MIN_RAISE: f64 = 0.005;
 
+/// What the level correction raises after a round with a violation.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Correction {
+    /// The sampled set and the bound together: the next round samples `{V <= c}` at the raised `c`, so the
+    /// certified set must hold its own level (a set a tracker inside stays within, in error).
+    Set,
+    /// The bound alone: every round samples the first round's set, and errors are checked against the raised
+    /// bound (a bound on the error from that set).
+    Bound,
+}
+
+impl Correction {
+    /// Its name in records and manifests.
+    pub fn name(self) -> &'static str {
+        match self {
+            Correction::Set => "set",
+            Correction::Bound => "bound",
+        }
+    }
+}
+
 /// How to verify.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct VerifyOptions {
@@ -54,6 +79,8 @@ pub struct VerifyOptions {
     pub delta: f64,
     /// Largest number of rounds of the level correction.
     pub max_rounds: usize,
+    /// What the correction raises.
+    pub correction: Correction,
     /// A sample violates a round when its error exceeds `(1 + slack)` times the round's level: room for a
     /// control held over each step, which lets the error creep slightly past a continuous-time bound.
     pub slack: f64,
@@ -91,6 +118,7 @@ impl Default for VerifyOptions {
             level_margin: 0.05,
             delta: 1e-6,
             max_rounds: 8,
+            correction: Correction::Set,
             slack: 0.02,
             horizon: 10.0,
             step: 0.01,
@@ -181,8 +209,10 @@ impl Family {
 /// One round of the level correction.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct RoundReport {
-    /// The level the round sampled under.
+    /// The level errors were checked against.
     pub level: f64,
+    /// The level the round sampled under (the same as `level` when the correction raises the set).
+    pub sampled_level: f64,
     /// Samples rolled out before the round ended.
     pub samples: usize,
     /// Those whose error exceeded `(1 + slack)` times the level.
@@ -232,7 +262,7 @@ pub struct RowReport {
 impl RowReport {
     /// The level the final round sampled under.
     pub fn sampled_level(&self) -> f64 {
-        self.rounds.last().map_or(f64::NAN, |r| r.level)
+        self.rounds.last().map_or(f64::NAN, |r| r.sampled_level)
     }
 }
 
@@ -317,17 +347,18 @@ struct Round {
     rollout_steps: u64,
 }
 
-/// One round at `level`: batches of samples rolled out until `n` are done or a batch has a violation.
+/// One round with errors checked against `level`: batches of samples rolled out until `n` are done or a batch
+/// has a violation.
 fn run_round(
     scene: &Scene<'_>,
     sampler: &mut SublevelSampler<'_>,
+    level: f64,
     n: usize,
     options: &VerifyOptions,
     rng: &mut StdRng,
 ) -> Result<Round, VerifyError> {
     let system = scene.system;
     let n_state = system.n_state();
-    let level = sampler.level();
     let steps_per_rollout = (options.horizon / options.step).round().max(1.0) as u64;
     let mut families = vec![Family::ModelWorstCase];
     if scene.grid.is_some() {
@@ -362,7 +393,9 @@ fn run_round(
             })
             .collect();
         if options.search.enabled() {
-            let chosen: Vec<usize> = (0..count).filter(|&j| errors[j] >= options.search.threshold * level).collect();
+            let mut chosen: Vec<usize> = (0..count).collect();
+            chosen.sort_by(|&a, &b| errors[b].total_cmp(&errors[a]));
+            chosen.truncate(options.search.per_batch);
             let starts: Vec<f64> =
                 chosen.iter().flat_map(|&j| samples[j * n_state..(j + 1) * n_state].to_vec()).collect();
             let found = search::search(scene, &starts, &options.search, rng)?;
@@ -379,7 +412,14 @@ fn run_round(
         done += count;
     }
     Ok(Round {
-        report: RoundReport { level, samples: done, violations, max_error, acceptance: sampler.acceptance() },
+        report: RoundReport {
+            level,
+            sampled_level: sampler.level(),
+            samples: done,
+            violations,
+            max_error,
+            acceptance: sampler.acceptance(),
+        },
         tally,
         searched,
         rollout_steps,
@@ -431,17 +471,22 @@ pub fn verify_row(
         .iter()
         .map(|&i| manifest.state[i].min.abs().min(manifest.state[i].max.abs()))
         .fold(f64::INFINITY, f64::min);
+    let first_level = level;
     let (last, outcome) = loop {
+        let sampled_level = match options.correction {
+            Correction::Set => level,
+            Correction::Bound => first_level,
+        };
         let mut sampler = SublevelSampler::new(
             evaluator,
             manifest,
             system,
             &params,
-            level,
+            sampled_level,
             options.proposal_box,
             options.max_proposals,
         );
-        let round = run_round(&scene, &mut sampler, n, options, &mut rng)?;
+        let round = run_round(&scene, &mut sampler, level, n, options, &mut rng)?;
         tracing::info!(
             beta = row.beta,
             level,
@@ -473,7 +518,8 @@ pub fn verify_row(
             violations: last.report.violations,
             horizon: options.horizon,
             step: options.step,
-            sampled_level: Some(last.report.level),
+            sampled_level: Some(last.report.sampled_level),
+            correction: Some(options.correction.name().into()),
             rounds: rounds.len(),
             planners: last.tally.results(),
         },

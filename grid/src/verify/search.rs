@@ -25,21 +25,20 @@ pub struct SearchOptions {
     pub segment: f64,
     /// Weight of the elites' frequencies in each update (the rest keeps the old probability).
     pub smoothing: f64,
-    /// A sample is searched when the other planners pushed its error to at least this share of the level it
-    /// was sampled under (0 searches every sample).
-    pub threshold: f64,
+    /// Samples searched per batch: those the other planner families pushed to the largest errors.
+    pub per_batch: usize,
 }
 
 impl Default for SearchOptions {
     fn default() -> Self {
-        Self { population: 16, iterations: 3, elites: 4, segment: 0.5, smoothing: 0.7, threshold: 0.9 }
+        Self { population: 16, iterations: 3, elites: 4, segment: 0.5, smoothing: 0.7, per_batch: 64 }
     }
 }
 
 impl SearchOptions {
     /// Whether the search runs at all.
     pub fn enabled(&self) -> bool {
-        self.population > 0 && self.iterations > 0
+        self.population > 0 && self.iterations > 0 && self.per_batch > 0
     }
 
     /// Why these options cannot run, if they cannot.
@@ -51,15 +50,13 @@ impl SearchOptions {
             && self.elites <= self.population
             && self.segment.is_finite()
             && self.segment > 0.0
-            && (0.0..=1.0).contains(&self.smoothing)
-            && self.threshold.is_finite()
-            && self.threshold >= 0.0;
+            && (0.0..=1.0).contains(&self.smoothing);
         if fine {
             Ok(())
         } else {
             Err(VerifyError::Setting(format!(
-                "search: population {} needs 1 <= elites ({}) <= population, a positive segment ({}), smoothing in [0, 1] ({}) and a threshold >= 0 ({})",
-                self.population, self.elites, self.segment, self.smoothing, self.threshold
+                "search: population {} needs 1 <= elites ({}) <= population, a positive segment ({}) and smoothing in [0, 1] ({})",
+                self.population, self.elites, self.segment, self.smoothing
             )))
         }
     }
