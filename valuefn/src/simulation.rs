@@ -161,4 +161,13 @@ mod tests {
         // 10 s at a mean dwell of 0.5 s: about 20 draws, half of them a change of sign.
         assert!((3..=20).contains(&switches), "{switches} switches");
     }
+
+    #[test]
+    fn a_schedule_holds_each_input_for_its_segment_and_the_last_past_the_end() {
+        let system = double_integrator::system();
+        let mut rng = StdRng::seed_from_u64(3);
+        let mut schedule = Planner::Schedule { inputs: vec![vec![0.8], vec![-0.8], vec![0.3]], segment: 0.5 };
+        let mut at = |t: f64| schedule.input(&system, &[0.8], &[0.0, 0.0], t, 1.0, &mut rng)[0];
+        assert_eq!([at(0.0), at(0.49), at(0.5), at(0.99), at(1.0), at(7.0)], [0.8, 0.8, -0.8, -0.8, 0.3, 0.3]);
+    }
 }

@@ -88,9 +88,9 @@ impl<'a> SublevelSampler<'a> {
         }
     }
 
-    /// The level whose sublevel set holds the share `acceptance` of the proposal box, estimated from a pilot
-    /// of proposals: the value quantile at that share. The box is the one narrowed for this sampler's level,
-    /// widened to the quantile level where that is larger (then the estimate is a lower bound of the share).
+    /// The level whose sublevel set holds the share `acceptance` of this sampler's proposal box, estimated from
+    /// a pilot of proposals: the value quantile at that share. Where it lies above this sampler's level, a
+    /// sampler at it draws from a wider box, in which its set holds a smaller share.
     pub fn quantile_level(&self, acceptance: f64, rng: &mut StdRng) -> Result<f64, VerifyError> {
         let n_state = self.lo.len();
         // Enough proposals that the quantile holds about 100 of them.
