@@ -6,11 +6,11 @@
 //! the served tracker control against every planner family: the worst-case planner of the model's own
 //! gradient, the worst-case planner of a grid solution's gradient (where one is given near the row's `beta`),
 //! random bang-bang planners, and a cross-entropy search over planner schedules ([`search`]) from the samples
-//! of each batch the others pushed furthest. A sample *violates* the round when its error exceeds `(1 + slack) c`. The
-//! first
-//! round samples under `(1 + margin) level`; a round with a violation ends there, the level is raised to the
-//! largest error seen, and the next round samples afresh, until a round rolls out all `N` samples without a
-//! violation. A row whose rounds run out, or whose raised level would take the set past the trained domain's
+//! of each batch the others pushed furthest. A sample *violates* the round when its error exceeds
+//! `(1 + slack) c`. The first round samples under `(1 + margin) level`, or under the level whose set holds a
+//! given share of the proposal box where that is higher; a round with a violation ends there, the level is
+//! raised to the largest error seen, and the next round samples afresh, until a round rolls out all `N`
+//! samples without a violation. A row whose rounds run out, or whose raised level would take the set past the trained domain's
 //! error coordinates, is not verified: its violations stay in the report and in the manifest. That is the
 //! [`Correction::Set`] correction; [`Correction::Bound`] keeps sampling the first round's set and raises only
 //! the bound the errors are checked against.
