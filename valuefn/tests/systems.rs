@@ -1,6 +1,7 @@
-//! The generic affine-system machinery against brute force and dubins4d's closed-form Hamiltonian.
+//! The generic affine-system machinery against brute force and the closed-form Hamiltonians of dubins4d and
+//! quad10d, and quad10d's exact decomposition into its axes.
 
-use fastrack_valuefn::system::{double_integrator, dubins4d, AffineSystem};
+use fastrack_valuefn::system::{double_integrator, dubins4d, quad10d, AffineSystem};
 use rand::{Rng, SeedableRng};
 
 fn random_state(system: &AffineSystem, rng: &mut impl Rng) -> Vec<f64> {
@@ -134,22 +135,146 @@ fn double_integrator_hamiltonian_equals_brute_force() {
 
 #[test]
 fn dissipation_bounds_dominate_hamiltonian_slopes() {
-    // |dH/dp_i| <= alpha_i: check with finite differences of H in p.
-    let system = dubins4d::system();
+    // |dH/dp_i| <= alpha_i: check with finite differences of H in p, at the largest parameters.
     let mut rng = rand::rngs::StdRng::seed_from_u64(13);
-    let mut alpha = vec![0.0; 4];
-    for _ in 0..500 {
-        let r = random_state(&system, &mut rng);
-        let p: Vec<f64> = (0..4).map(|_| rng.random_range(-3.0..3.0)).collect();
-        let params = [1.25, 1.25];
-        system.dissipation_bounds(&r, &params, &mut alpha);
-        for i in 0..4 {
-            let mut q = p.clone();
-            q[i] += 1e-6;
-            let slope = (system.hamiltonian(&r, &q, &params) - system.hamiltonian(&r, &p, &params)) / 1e-6;
-            assert!(slope.abs() <= alpha[i] + 1e-6, "dim {i}: slope {slope} > alpha {}", alpha[i]);
+    for id in fastrack_valuefn::system::SYSTEM_IDS {
+        let system = fastrack_valuefn::system::by_id(id).unwrap();
+        let n = system.n_state();
+        let params: Vec<f64> = system.params.iter().map(|p| p.max).collect();
+        let mut alpha = vec![0.0; n];
+        for _ in 0..500 {
+            let r = random_state(&system, &mut rng);
+            let p: Vec<f64> = (0..n).map(|_| rng.random_range(-3.0..3.0)).collect();
+            system.dissipation_bounds(&r, &params, &mut alpha);
+            for i in 0..n {
+                let mut q = p.clone();
+                q[i] += 1e-6;
+                let slope = (system.hamiltonian(&r, &q, &params) - system.hamiltonian(&r, &p, &params)) / 1e-6;
+                assert!(slope.abs() <= alpha[i] + 1e-6, "{id} dim {i}: slope {slope} > alpha {}", alpha[i]);
+            }
         }
     }
+}
+
+#[test]
+fn quad10d_hamiltonian_and_controls_equal_brute_force_and_closed_form() {
+    use quad10d::{D0, D1, GRAVITY as G, K_T, N0, THRUST_MAX, TILT_MAX};
+    let system = quad10d::system();
+    let mut rng = rand::rngs::StdRng::seed_from_u64(21);
+    let (mut thrust_up, mut thrust_off) = (0, 0);
+    for _ in 0..2000 {
+        let r = random_state(&system, &mut rng);
+        let p: Vec<f64> = (0..10).map(|_| rng.random_range(-3.0..3.0)).collect();
+        let params: Vec<f64> = (0..3).map(|_| rng.random_range(0.5..1.5)).collect();
+        let h = system.hamiltonian(&r, &p, &params);
+        let brute = brute_force_hamiltonian(&system, &r, &p, &params);
+        assert!((h - brute).abs() < 1e-9, "H {h} vs brute force {brute}");
+        let axis = |k: usize, beta: f64| {
+            p[k] * r[k + 1] + p[k + 1] * G * r[k + 2].tan() + p[k + 2] * (-D1 * r[k + 2] + r[k + 3])
+                - p[k + 3] * D0 * r[k + 2]
+                + beta * p[k].abs()
+                - N0 * TILT_MAX * p[k + 3].abs()
+        };
+        // The thrust box [0, 1.5 g] is not centred on 0: the minimum of p10 k_T u_z is k_T 1.5 g p10 when
+        // p10 < 0 and 0 otherwise, and gravity is a drift.
+        let vertical = p[8] * r[9] + params[2] * p[8].abs() - G * p[9] + (K_T * THRUST_MAX * p[9]).min(0.0);
+        let closed = axis(0, params[0]) + axis(4, params[1]) + vertical;
+        assert!((h - closed).abs() < 1e-9, "H {h} vs the closed form {closed}");
+
+        let u = system.optimal_control(&r, &p);
+        let thrust = if p[9] < 0.0 {
+            thrust_up += 1;
+            THRUST_MAX
+        } else {
+            thrust_off += 1;
+            0.0
+        };
+        assert_eq!(u, vec![-TILT_MAX * p[3].signum(), -TILT_MAX * p[7].signum(), thrust]);
+        let up = system.worst_planner(&p, &params);
+        assert_eq!(up, vec![-params[0] * p[0].signum(), -params[1] * p[4].signum(), -params[2] * p[8].signum()]);
+        let mut rdot = vec![0.0; 10];
+        system.dynamics(&r, &u, &up, &[], &mut rdot);
+        let attained: f64 = rdot.iter().zip(&p).map(|(a, b)| a * b).sum();
+        assert!((attained - h).abs() < 1e-9, "u*, u_p* attain H");
+    }
+    assert!(thrust_up > 500 && thrust_off > 500, "both ends of the thrust box: {thrust_up} / {thrust_off}");
+    // Where the gradient gives no direction, the control is the middle of the box: hover-ish thrust 0.75 g.
+    let u = system.optimal_control(&[0.0; 10], &[0.0; 10]);
+    assert_eq!(u, vec![0.0, 0.0, 0.5 * THRUST_MAX]);
+}
+
+#[test]
+fn quad10d_splits_exactly_into_its_axes() {
+    let full = quad10d::system();
+    let (x, z) = (quad10d::x_axis(), quad10d::z_axis());
+    assert_eq!((x.n_state(), x.n_params(), x.n_control(), x.planner_dim()), (4, 1, 1, 1));
+    assert_eq!((z.n_state(), z.n_params(), z.n_control(), z.planner_dim()), (2, 1, 1, 1));
+    assert_eq!((x.error_coords.clone(), z.error_coords.clone()), (vec![0], vec![0]));
+    assert_eq!((x.params[0].name, z.params[0].name), ("beta_1", "beta_3"));
+    assert_eq!((z.controls[0].min, z.controls[0].max), (0.0, quad10d::THRUST_MAX));
+    // The y axis is the x axis on r5..r8 with beta_2.
+    let y = full.subsystem("quad10d_y", "y", &[4, 5, 6, 7]).unwrap();
+    assert_eq!(y.params[0].name, "beta_2");
+    let mut rng = rand::rngs::StdRng::seed_from_u64(22);
+    for _ in 0..1000 {
+        let r = random_state(&full, &mut rng);
+        let p: Vec<f64> = (0..10).map(|_| rng.random_range(-3.0..3.0)).collect();
+        let params: Vec<f64> = (0..3).map(|_| rng.random_range(0.5..1.5)).collect();
+        // H splits into the axes' Hamiltonians, the y axis solved by the x axis' system.
+        let parts = x.hamiltonian(&r[0..4], &p[0..4], &params[0..1])
+            + x.hamiltonian(&r[4..8], &p[4..8], &params[1..2])
+            + z.hamiltonian(&r[8..10], &p[8..10], &params[2..3]);
+        let h = full.hamiltonian(&r, &p, &params);
+        assert!((h - parts).abs() < 1e-9, "H {h} vs the sum of its axes {parts}");
+        assert!(
+            (y.hamiltonian(&r[4..8], &p[4..8], &params[1..2]) - x.hamiltonian(&r[4..8], &p[4..8], &params[1..2])).abs()
+                < 1e-12
+        );
+        // The full control is the axes' controls side by side, and so are the dynamics.
+        let u = full.optimal_control(&r, &p);
+        let (ux, uy, uz) = (
+            x.optimal_control(&r[0..4], &p[0..4]),
+            x.optimal_control(&r[4..8], &p[4..8]),
+            z.optimal_control(&r[8..10], &p[8..10]),
+        );
+        assert_eq!(u, vec![ux[0], uy[0], uz[0]]);
+        let up = full.worst_planner(&p, &params);
+        let mut rdot = vec![0.0; 10];
+        full.dynamics(&r, &u, &up, &[], &mut rdot);
+        let mut axis_dot = vec![0.0; 4];
+        x.dynamics(&r[4..8], &uy, &up[1..2], &[], &mut axis_dot);
+        assert_eq!(&rdot[4..8], axis_dot.as_slice());
+        let mut vertical_dot = vec![0.0; 2];
+        z.dynamics(&r[8..10], &uz, &up[2..3], &[], &mut vertical_dot);
+        assert_eq!(&rdot[8..10], vertical_dot.as_slice());
+    }
+}
+
+#[test]
+fn a_subsystem_must_decouple() {
+    let dubins = dubins4d::system();
+    let coupled = dubins.subsystem("d", "d", &[0, 1]).unwrap_err();
+    assert!(coupled.contains("the drift of x_r depends on v, which is not chosen"), "{coupled}");
+    let no_error = dubins.subsystem("d", "d", &[2, 3]).unwrap_err();
+    assert!(no_error.contains("no error coordinate"), "{no_error}");
+    let quad = quad10d::system();
+    // r3 alone: its drift depends on r4.
+    assert!(quad.subsystem("q", "q", &[0, 1, 2]).unwrap_err().contains("w_x"));
+    assert!(quad.subsystem("q", "q", &[0, 11]).unwrap_err().contains("does not exist"));
+    // An input acting on two axes couples them.
+    let mut shared = quad10d::system();
+    shared.g_control[(7, 0)] = 1.0;
+    let err = shared.subsystem("q", "q", &[0, 1, 2, 3]).unwrap_err();
+    assert!(err.contains("control u_x also acts on w_y"), "{err}");
+}
+
+#[test]
+fn quad10d_relative_state_subtracts_the_planner_position_per_axis() {
+    let space = quad10d::system().state_space();
+    let tracker = [1.0, 0.5, 0.1, 0.2, -1.0, 0.0, 0.0, 0.0, 2.0, -0.5];
+    let r = space.relative_state(&tracker, &[0.25, -1.5, 1.0]);
+    assert_eq!(r, vec![0.75, 0.5, 0.1, 0.2, 0.5, 0.0, 0.0, 0.0, 1.0, -0.5]);
+    assert!((space.tracking_error(&r) - (0.75f64 * 0.75 + 0.25 + 1.0).sqrt()).abs() < 1e-12);
 }
 
 #[test]

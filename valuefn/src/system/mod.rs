@@ -10,6 +10,7 @@ mod boxset;
 pub mod double_integrator;
 pub mod drift;
 pub mod dubins4d;
+pub mod quad10d;
 mod state_space;
 
 pub use boxset::BoxSet;
@@ -143,6 +144,95 @@ impl AffineSystem {
         shared.params = vec![ParamDim { name: "beta", unit: first.unit, min, max }];
         shared.planner_input_param = vec![0; self.planner_input_param.len()];
         shared
+    }
+
+    /// The subsystem on the state coordinates `coords` (in that order), with the inputs acting on them and
+    /// the parameters bounding its planner inputs, named `id`. It must decouple exactly: the drift of each
+    /// chosen coordinate depends on chosen coordinates only, and every input acting on a chosen coordinate
+    /// acts on chosen coordinates only. Its Hamiltonian is then the part of this system's Hamiltonian over
+    /// those coordinates, so its value function is exact ground truth for them. Errors name what couples.
+    pub fn subsystem(
+        &self,
+        id: &'static str,
+        description: &'static str,
+        coords: &[usize],
+    ) -> Result<AffineSystem, String> {
+        let n = self.n_state();
+        if let Some(&bad) = coords.iter().find(|&&i| i >= n) {
+            return Err(format!("coordinate {bad} does not exist in {} ({n} coordinates)", self.id));
+        }
+        let new_index = |i: usize| coords.iter().position(|&c| c == i);
+        let chosen = |i: usize| new_index(i).is_some();
+        let mut terms = Vec::new();
+        for (output, t) in self.drift.terms.iter().filter_map(|t| Some((new_index(t.output)?, t))) {
+            let mut factors = Vec::with_capacity(t.factors.len());
+            for f in &t.factors {
+                let (j, remap): (usize, fn(usize) -> Factor) = match *f {
+                    Factor::Linear(j) => (j, Factor::Linear),
+                    Factor::Sin(j) => (j, Factor::Sin),
+                    Factor::Cos(j) => (j, Factor::Cos),
+                    Factor::Tan(j) => (j, Factor::Tan),
+                };
+                let k = new_index(j).ok_or_else(|| {
+                    format!(
+                        "the drift of {} depends on {}, which is not chosen",
+                        self.state[t.output].name, self.state[j].name
+                    )
+                })?;
+                factors.push(remap(k));
+            }
+            terms.push(DriftTerm { output, coefficient: t.coefficient, factors });
+        }
+        // The columns of `m` acting on a chosen coordinate, checked to act on no other.
+        let columns = |m: &DMatrix<f64>, kind: &str, name: &dyn Fn(usize) -> String| -> Result<Vec<usize>, String> {
+            let mut picked = Vec::new();
+            for j in 0..m.ncols() {
+                let acts: Vec<usize> = (0..n).filter(|&i| m[(i, j)] != 0.0).collect();
+                if acts.iter().any(|&i| chosen(i)) {
+                    if let Some(&i) = acts.iter().find(|&&i| !chosen(i)) {
+                        return Err(format!(
+                            "{kind} {} also acts on {}, which is not chosen",
+                            name(j),
+                            self.state[i].name
+                        ));
+                    }
+                    picked.push(j);
+                }
+            }
+            Ok(picked)
+        };
+        let controls = columns(&self.g_control, "control", &|j| self.controls[j].name.to_string())?;
+        let planner_inputs = columns(&self.g_planner, "planner input", &|j| format!("u_p{j}"))?;
+        let disturbances = columns(&self.g_disturbance, "disturbance", &|j| self.disturbances[j].name.to_string())?;
+        let planner_dims = columns(&self.planner_to_state, "planner coordinate", &|j| format!("p{j}"))?;
+        let mut params: Vec<usize> = planner_inputs.iter().map(|&j| self.planner_input_param[j]).collect();
+        params.sort_unstable();
+        params.dedup();
+        let error_coords: Vec<usize> = self.error_coords.iter().filter_map(|&i| new_index(i)).collect();
+        if error_coords.is_empty() {
+            return Err("no error coordinate is chosen: the subsystem would have no tracking error".into());
+        }
+        let pick = |m: &DMatrix<f64>, cols: &[usize]| {
+            DMatrix::from_fn(coords.len(), cols.len(), |i, j| m[(coords[i], cols[j])])
+        };
+        Ok(AffineSystem {
+            id,
+            description,
+            state: coords.iter().map(|&i| self.state[i].clone()).collect(),
+            error_coords,
+            params: params.iter().map(|&k| self.params[k].clone()).collect(),
+            planner_input_param: planner_inputs
+                .iter()
+                .map(|&j| params.iter().position(|&k| k == self.planner_input_param[j]).unwrap_or_default())
+                .collect(),
+            controls: controls.iter().map(|&j| self.controls[j].clone()).collect(),
+            disturbances: disturbances.iter().map(|&j| self.disturbances[j].clone()).collect(),
+            drift: Drift { n_state: coords.len(), terms },
+            g_control: pick(&self.g_control, &controls),
+            g_planner: pick(&self.g_planner, &planner_inputs),
+            g_disturbance: pick(&self.g_disturbance, &disturbances),
+            planner_to_state: pick(&self.planner_to_state, &planner_dims),
+        })
     }
 
     /// The relative-state space: domains, error coordinates and `Q`.
@@ -294,6 +384,9 @@ pub fn by_id(id: &str) -> Option<AffineSystem> {
     match id {
         dubins4d::ID => Some(dubins4d::system()),
         double_integrator::ID => Some(double_integrator::system()),
+        quad10d::ID => Some(quad10d::system()),
+        quad10d::X_AXIS_ID => Some(quad10d::x_axis()),
+        quad10d::Z_AXIS_ID => Some(quad10d::z_axis()),
         _ => None,
     }
 }
@@ -313,4 +406,5 @@ pub fn for_bundle(id: &str, n_params: usize) -> Option<AffineSystem> {
 }
 
 /// Ids accepted by [`by_id`].
-pub const SYSTEM_IDS: &[&str] = &[dubins4d::ID, double_integrator::ID];
+pub const SYSTEM_IDS: &[&str] =
+    &[dubins4d::ID, double_integrator::ID, quad10d::ID, quad10d::X_AXIS_ID, quad10d::Z_AXIS_ID];
