@@ -15,9 +15,9 @@
 
 use crate::solver::Solution;
 use fastrack_valuefn::simulation::{step_relative, HeldInputs, Planner};
-use fastrack_valuefn::system::AffineSystem;
+use fastrack_valuefn::system::{AffineSystem, DecomposedAxis};
 use rand::rngs::StdRng;
-use rand::SeedableRng;
+use rand::{Rng, SeedableRng};
 use rayon::prelude::*;
 use serde::{Deserialize, Serialize};
 
@@ -122,35 +122,154 @@ fn check(options: &RolloutOptions) -> Result<(), RolloutError> {
     Ok(())
 }
 
-/// `(sustained error, peak error, left the domain)` of one rollout from `start`.
+/// A tracker policy read off a value gradient over the whole relative state, on grids of a domain.
+trait GradientField: Sync {
+    /// The value gradient at `r`, written into `out`.
+    fn gradient(&self, r: &[f64], out: &mut [f64]);
+    /// Whether `r` lies outside a grid on a non-periodic axis (values there are clamped).
+    fn outside(&self, r: &[f64]) -> bool;
+}
+
+fn outside_grid(solution: &Solution, r: &[f64]) -> bool {
+    solution.grid.axes().iter().zip(r).any(|(a, &x)| !a.periodic && (x < a.min || x > a.max))
+}
+
+impl GradientField for Solution {
+    fn gradient(&self, r: &[f64], out: &mut [f64]) {
+        Solution::gradient(self, r, out);
+    }
+
+    fn outside(&self, r: &[f64]) -> bool {
+        outside_grid(self, r)
+    }
+}
+
+/// Axis solutions side by side: each axis' solution gives the gradient on its own coordinates.
+struct AxisSolutions<'a> {
+    axes: &'a [(DecomposedAxis, &'a Solution)],
+}
+
+impl AxisSolutions<'_> {
+    fn cut(axis: &DecomposedAxis, r: &[f64]) -> Vec<f64> {
+        axis.coords.iter().map(|&i| r[i]).collect()
+    }
+}
+
+impl GradientField for AxisSolutions<'_> {
+    fn gradient(&self, r: &[f64], out: &mut [f64]) {
+        for (axis, solution) in self.axes {
+            let mut p = vec![0.0; axis.coords.len()];
+            solution.gradient(&Self::cut(axis, r), &mut p);
+            for (&i, g) in axis.coords.iter().zip(p) {
+                out[i] = g;
+            }
+        }
+    }
+
+    fn outside(&self, r: &[f64]) -> bool {
+        self.axes.iter().any(|(axis, solution)| outside_grid(solution, &Self::cut(axis, r)))
+    }
+}
+
+/// What one rollout reached.
+struct Reached {
+    /// Largest error over the second half of the horizon.
+    sustained: f64,
+    /// Largest error over the whole horizon.
+    peak: f64,
+    /// Per group of error coordinates (an axis' own error), the largest error over the second half.
+    group_sustained: Vec<f64>,
+    /// Whether the rollout left a grid's domain.
+    left: bool,
+}
+
+/// One rollout from `start` with the tracker policy of `field`; `groups` are sets of error coordinates whose
+/// own errors are tracked besides the whole error.
+#[allow(clippy::too_many_arguments)]
 fn roll_out(
     system: &AffineSystem,
-    solution: &Solution,
+    field: &dyn GradientField,
+    params: &[f64],
     start: &[f64],
     mut planner: Planner,
     rng: &mut StdRng,
+    groups: &[Vec<usize>],
     options: &RolloutOptions,
-) -> (f64, f64, bool) {
-    let params = &solution.info.params;
+) -> Reached {
     let n = start.len();
     let (mut r, mut p) = (start.to_vec(), vec![0.0; n]);
     let steps = (options.horizon / options.step).round() as usize;
-    let (mut sustained, mut peak, mut left) = (0.0f64, system.tracking_error(&r), false);
+    let mut reached = Reached {
+        sustained: 0.0,
+        peak: system.tracking_error(&r),
+        group_sustained: vec![0.0; groups.len()],
+        left: false,
+    };
     let d = vec![0.0; system.disturbances.len()];
     for k in 0..steps {
         let t = k as f64 * options.step;
-        solution.gradient(&r, &mut p);
+        field.gradient(&r, &mut p);
         let u = system.optimal_control(&r, &p);
         let u_p = planner.input(system, params, &p, t, options.mean_dwell, rng);
         step_relative(system, &mut r, HeldInputs { control: &u, planner: &u_p, disturbance: &d }, options.step);
         let error = system.tracking_error(&r);
-        peak = peak.max(error);
+        reached.peak = reached.peak.max(error);
         if 2 * (k + 1) > steps {
-            sustained = sustained.max(error);
+            reached.sustained = reached.sustained.max(error);
+            for (held, group) in reached.group_sustained.iter_mut().zip(groups) {
+                *held = held.max(group.iter().map(|&i| r[i] * r[i]).sum::<f64>().sqrt());
+            }
         }
-        left |= solution.grid.axes().iter().zip(&r).any(|(a, &x)| !a.periodic && (x < a.min || x > a.max));
+        reached.left |= field.outside(&r);
     }
-    (sustained, peak, left)
+    reached
+}
+
+/// Every start rolled out against the worst-case planner and `options.random_planners` random ones, on the
+/// cores: `(planner is worst-case, what it reached)` per rollout.
+fn roll_out_starts(
+    system: &AffineSystem,
+    field: &dyn GradientField,
+    params: &[f64],
+    starts: &[Vec<f64>],
+    groups: &[Vec<usize>],
+    options: &RolloutOptions,
+) -> Vec<(bool, Reached)> {
+    starts
+        .par_iter()
+        .enumerate()
+        .flat_map_iter(|(i, start)| {
+            (0..=options.random_planners).map(move |j| {
+                let planner = if j == 0 { Planner::WorstCase } else { Planner::bang_bang() };
+                let seed = options.seed ^ ((i * (options.random_planners + 1) + j) as u64).wrapping_mul(0x9E37_79B9);
+                let mut rng = StdRng::seed_from_u64(seed);
+                (j == 0, roll_out(system, field, params, start, planner, &mut rng, groups, options))
+            })
+        })
+        .collect()
+}
+
+/// The largest sustained error of the worst-case (`true`) or random planners, if any rolled out.
+fn largest_sustained(results: &[(bool, Reached)], worst_case: bool) -> Option<f64> {
+    results.iter().filter(|x| x.0 == worst_case).map(|x| x.1.sustained).reduce(f64::max)
+}
+
+/// The nodes of `{V <= (1 + margin) V_min}` of `solution`, thinned evenly to at most `max` points, and `V_min`.
+fn sublevel_nodes(solution: &Solution, margin: f64, max: usize) -> (Vec<Vec<f64>>, f64) {
+    let v_min = solution.values.iter().copied().fold(f64::INFINITY, f64::min);
+    let level = v_min + margin * v_min.abs();
+    let nodes: Vec<usize> = (0..solution.values.len()).filter(|&f| solution.values[f] <= level).collect();
+    let stride = nodes.len().div_ceil(max).max(1);
+    let points = nodes
+        .iter()
+        .step_by(stride)
+        .map(|&f| {
+            let mut r = vec![0.0; solution.grid.ndim()];
+            solution.grid.point(f, &mut r);
+            r
+        })
+        .collect();
+    (points, v_min)
 }
 
 /// Rolls out `solution`'s tracker policy of `system` against the planners of `options`.
@@ -167,41 +286,102 @@ pub fn roll_out_solution(
             system: system.id.into(),
         });
     }
-    let v_min = solution.values.iter().copied().fold(f64::INFINITY, f64::min);
-    let level = v_min + options.start_margin * v_min.abs();
-    let nodes: Vec<usize> = (0..solution.values.len()).filter(|&f| solution.values[f] <= level).collect();
-    let stride = nodes.len().div_ceil(options.max_starts).max(1);
-    let starts: Vec<Vec<f64>> = nodes
-        .iter()
-        .step_by(stride)
-        .map(|&f| {
-            let mut r = vec![0.0; system.n_state()];
-            solution.grid.point(f, &mut r);
-            r
-        })
-        .collect();
-    // (planner is worst-case, sustained, peak, left the domain) per rollout.
-    let results: Vec<(bool, f64, f64, bool)> = starts
-        .par_iter()
-        .enumerate()
-        .flat_map_iter(|(i, start)| {
-            (0..=options.random_planners).map(move |j| {
-                let planner = if j == 0 { Planner::WorstCase } else { Planner::bang_bang() };
-                let seed = options.seed ^ ((i * (options.random_planners + 1) + j) as u64).wrapping_mul(0x9E37_79B9);
-                let mut rng = StdRng::seed_from_u64(seed);
-                let (sustained, peak, left) = roll_out(system, solution, start, planner, &mut rng, options);
-                (j == 0, sustained, peak, left)
-            })
-        })
-        .collect();
-    let largest = |worst_case: bool| results.iter().filter(|x| x.0 == worst_case).map(|x| x.1).reduce(f64::max);
+    let (starts, v_min) = sublevel_nodes(solution, options.start_margin, options.max_starts);
+    let results = roll_out_starts(system, solution, &solution.info.params, &starts, &[], options);
     Ok(RolloutReport {
         v_min,
         starts: starts.len(),
         // Every start has its worst-case rollout, and there is at least one start (the minimum's node).
-        sustained_worst_case: largest(true).unwrap_or(f64::NAN),
-        sustained_random: largest(false),
-        peak: results.iter().map(|x| x.2).fold(f64::NEG_INFINITY, f64::max),
-        left_domain: results.iter().filter(|x| x.3).count(),
+        sustained_worst_case: largest_sustained(&results, true).unwrap_or(f64::NAN),
+        sustained_random: largest_sustained(&results, false),
+        peak: results.iter().map(|x| x.1.peak).fold(f64::NEG_INFINITY, f64::max),
+        left_domain: results.iter().filter(|x| x.1.left).count(),
+    })
+}
+
+/// What adversarial planners sustain against axis solutions' policies side by side in the full system.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+pub struct AxesRolloutReport {
+    /// Each axis' `V_min` (the bound on its own error), in the decomposition's order.
+    pub axis_v_min: Vec<f64>,
+    /// The bound they combine into: `sqrt(sum V_min_i^2)`, since each axis' error stays inside its own bound.
+    pub combined_bound: f64,
+    /// The full system's parameters the axes were solved at.
+    pub params: Vec<f64>,
+    /// The rollouts as for one solution, with `v_min` the combined bound.
+    pub rollout: RolloutReport,
+    /// Per axis, the largest error of its own over the second half of the horizon, any planner.
+    pub axis_sustained: Vec<f64>,
+}
+
+/// Rolls out the axes' policies side by side (each axis' control from its own solution's gradient) in the full
+/// `system`, from starts whose every axis lies in its solution's set `{V <= (1 + start_margin) V_min}`
+/// (each axis' nodes drawn at random), against the planners of `options`.
+pub fn roll_out_axes(
+    system: &AffineSystem,
+    axes: &[(DecomposedAxis, &Solution)],
+    options: &RolloutOptions,
+) -> Result<AxesRolloutReport, RolloutError> {
+    check(options)?;
+    let mut params = vec![f64::NAN; system.n_params()];
+    for (axis, solution) in axes {
+        if solution.info.system != axis.subsystem || solution.grid.ndim() != axis.coords.len() {
+            return Err(RolloutError::System {
+                solution: solution.info.system.clone(),
+                axes: solution.grid.ndim(),
+                system: axis.subsystem.into(),
+            });
+        }
+        let beta = solution.info.params[0];
+        let slot = &mut params[axis.param];
+        if !slot.is_nan() && *slot != beta {
+            return Err(RolloutError::Setting(format!(
+                "parameter {} of {} is {} on one axis and {beta} on another",
+                axis.param, system.id, *slot
+            )));
+        }
+        *slot = beta;
+    }
+    if let Some(k) = params.iter().position(|p| p.is_nan()) {
+        return Err(RolloutError::Setting(format!("no axis solution gives parameter {k} of {}", system.id)));
+    }
+    let sets: Vec<(Vec<Vec<f64>>, f64)> =
+        axes.iter().map(|(_, s)| sublevel_nodes(s, options.start_margin, options.max_starts)).collect();
+    let mut rng = StdRng::seed_from_u64(options.seed);
+    let starts: Vec<Vec<f64>> = (0..options.max_starts)
+        .map(|_| {
+            let mut r = vec![0.0; system.n_state()];
+            for ((axis, _), (nodes, _)) in axes.iter().zip(&sets) {
+                let node = &nodes[rng.random_range(0..nodes.len())];
+                for (&i, &x) in axis.coords.iter().zip(node) {
+                    r[i] = x;
+                }
+            }
+            r
+        })
+        .collect();
+    let groups: Vec<Vec<usize>> = axes
+        .iter()
+        .map(|(axis, _)| axis.coords.iter().copied().filter(|i| system.error_coords.contains(i)).collect())
+        .collect();
+    let field = AxisSolutions { axes };
+    let results = roll_out_starts(system, &field, &params, &starts, &groups, options);
+    let axis_v_min: Vec<f64> = sets.iter().map(|(_, v)| *v).collect();
+    let combined_bound = axis_v_min.iter().map(|v| v * v).sum::<f64>().sqrt();
+    Ok(AxesRolloutReport {
+        combined_bound,
+        params,
+        rollout: RolloutReport {
+            v_min: combined_bound,
+            starts: starts.len(),
+            sustained_worst_case: largest_sustained(&results, true).unwrap_or(f64::NAN),
+            sustained_random: largest_sustained(&results, false),
+            peak: results.iter().map(|x| x.1.peak).fold(f64::NEG_INFINITY, f64::max),
+            left_domain: results.iter().filter(|x| x.1.left).count(),
+        },
+        axis_sustained: (0..axes.len())
+            .map(|a| results.iter().map(|x| x.1.group_sustained[a]).fold(0.0, f64::max))
+            .collect(),
+        axis_v_min,
     })
 }

@@ -251,6 +251,40 @@ fn quad10d_splits_exactly_into_its_axes() {
 }
 
 #[test]
+fn every_decomposition_partitions_the_state_into_its_subsystems() {
+    let mut rng = rand::rngs::StdRng::seed_from_u64(23);
+    let mut decomposed = 0;
+    for id in fastrack_valuefn::system::SYSTEM_IDS {
+        let Some(axes) = fastrack_valuefn::system::decomposition(id) else { continue };
+        decomposed += 1;
+        let full = fastrack_valuefn::system::by_id(id).unwrap();
+        let mut covered: Vec<usize> = axes.iter().flat_map(|a| a.coords.clone()).collect();
+        covered.sort_unstable();
+        assert_eq!(covered, (0..full.n_state()).collect::<Vec<_>>(), "{id}: the axes partition the state");
+        for _ in 0..200 {
+            let r = random_state(&full, &mut rng);
+            let p: Vec<f64> = (0..full.n_state()).map(|_| rng.random_range(-3.0..3.0)).collect();
+            let params: Vec<f64> = full.params.iter().map(|d| rng.random_range(d.min..d.max)).collect();
+            let mut sum = 0.0;
+            for axis in &axes {
+                let sub = fastrack_valuefn::system::by_id(axis.subsystem).unwrap();
+                let cut = full.subsystem("cut", "cut", &axis.coords).unwrap();
+                let (ra, pa): (Vec<f64>, Vec<f64>) = axis.coords.iter().map(|&i| (r[i], p[i])).unzip();
+                let h = sub.hamiltonian(&ra, &pa, &[params[axis.param]]);
+                assert!(
+                    (h - cut.hamiltonian(&ra, &pa, &[params[axis.param]])).abs() < 1e-12,
+                    "{id}: {}",
+                    axis.subsystem
+                );
+                sum += h;
+            }
+            assert!((full.hamiltonian(&r, &p, &params) - sum).abs() < 1e-9, "{id}: H is the sum over its axes");
+        }
+    }
+    assert_eq!(decomposed, 1, "quad10d decomposes");
+}
+
+#[test]
 fn a_subsystem_must_decouple() {
     let dubins = dubins4d::system();
     let coupled = dubins.subsystem("d", "d", &[0, 1]).unwrap_err();

@@ -1,14 +1,15 @@
 //! `rollout`: what adversarial planners sustain against grid solutions' own tracker policies, beside each
-//! solution's `V_min`; a table, a plot against `beta` and a record.
+//! solution's `V_min`; a table, a plot against `beta` and a record. With `--system` naming a decomposed
+//! system, the solutions are its axes' and are rolled out side by side in the full system, per `beta`.
 
 use super::common::command_line;
 use anyhow::Context;
 use fastrack_grid::format::load;
-use fastrack_grid::rollout::{roll_out_solution, RolloutOptions, RolloutReport};
+use fastrack_grid::rollout::{roll_out_axes, roll_out_solution, AxesRolloutReport, RolloutOptions, RolloutReport};
 use fastrack_grid::solver::Solution;
 use fastrack_valuefn::plot::{line_chart, Chart, Series};
 use fastrack_valuefn::record::{write_record, Table};
-use fastrack_valuefn::system::by_id;
+use fastrack_valuefn::system::{by_id, decomposition, DecomposedAxis};
 use serde_json::json;
 use std::path::PathBuf;
 
@@ -18,6 +19,10 @@ pub struct Args {
     /// Solution files (`.ftgrid`), comma separated.
     #[arg(long, value_delimiter = ',', required = true)]
     solutions: Vec<PathBuf>,
+    /// A system with an exact decomposition (quad10d): the solutions are its axes' subsystems, one per
+    /// subsystem and `beta`, rolled out side by side in the full system with every `beta_i` equal.
+    #[arg(long)]
+    system: Option<String>,
     /// Rollout horizon (s); the sustained error is the largest over its second half.
     #[arg(long, default_value_t = 60.0)]
     horizon: f64,
@@ -70,6 +75,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         mean_dwell: args.mean_dwell,
         seed: args.seed,
     };
+    if let Some(id) = &args.system {
+        return run_axes(&args, &options, id);
+    }
     let mut results: Vec<(PathBuf, Solution, RolloutReport)> = Vec::new();
     for path in &args.solutions {
         let solution = load(path).with_context(|| format!("loading {}", path.display()))?;
@@ -172,5 +180,113 @@ fn write_outputs(
         &[("sustained error against each solution's policy", &table)],
     )?;
     println!("wrote {} and {}", path.display(), png.display());
+    Ok(())
+}
+
+/// The axis solutions of one `beta`, in the decomposition's order.
+fn axes_at(
+    id: &str,
+    axes: &[DecomposedAxis],
+    solutions: &[(PathBuf, Solution)],
+    beta: f64,
+) -> anyhow::Result<Vec<(DecomposedAxis, Solution)>> {
+    axes.iter()
+        .map(|axis| {
+            let mut found =
+                solutions.iter().filter(|(_, s)| s.info.system == axis.subsystem && s.info.params[0] == beta);
+            let (path, solution) = found
+                .next()
+                .with_context(|| format!("{id} at beta {beta}: no solution of its axis `{}`", axis.subsystem))?;
+            if let Some((other, _)) = found.next() {
+                anyhow::bail!(
+                    "{id} at beta {beta}: two solutions of `{}` ({} and {}); give one per beta",
+                    axis.subsystem,
+                    path.display(),
+                    other.display()
+                );
+            }
+            Ok((axis.clone(), solution.clone()))
+        })
+        .collect()
+}
+
+/// `rollout --system`: the axes of a decomposed system side by side, per `beta`.
+fn run_axes(args: &Args, options: &RolloutOptions, id: &str) -> anyhow::Result<()> {
+    let system = by_id(id).with_context(|| format!("unknown system `{id}`"))?;
+    let axes = decomposition(id).with_context(|| format!("`{id}` has no decomposition into axes"))?;
+    let mut solutions = Vec::new();
+    for path in &args.solutions {
+        let solution = load(path).with_context(|| format!("loading {}", path.display()))?;
+        if !axes.iter().any(|a| a.subsystem == solution.info.system) {
+            anyhow::bail!("{}: system `{}` is not an axis of {id}", path.display(), solution.info.system);
+        }
+        solutions.push((path.clone(), solution));
+    }
+    let mut betas: Vec<f64> = solutions.iter().map(|(_, s)| s.info.params[0]).collect();
+    betas.sort_by(f64::total_cmp);
+    betas.dedup();
+    let mut table = Table::new(&[
+        "beta",
+        "axis V_min",
+        "combined bound",
+        "sustained: worst-case planner",
+        "random planners",
+        "sustained / bound",
+        "axis sustained / own V_min",
+        "peak",
+        "starts",
+        "left the domain",
+    ]);
+    let mut reports: Vec<AxesRolloutReport> = Vec::new();
+    for beta in betas {
+        let picked = axes_at(id, &axes, &solutions, beta)?;
+        let pairs: Vec<(DecomposedAxis, &Solution)> = picked.iter().map(|(a, s)| (a.clone(), s)).collect();
+        let report = roll_out_axes(&system, &pairs, options)?;
+        let r = &report.rollout;
+        let own: Vec<String> =
+            report.axis_sustained.iter().zip(&report.axis_v_min).map(|(s, v)| format!("{:.3}", s / v)).collect();
+        println!(
+            "{id} at beta {beta}: axis V_min {:?}, combined bound {:.4}; sustained: worst-case {:.4}, random {} ({:.3} of the bound); each axis against its own V_min: {}; {} rollouts left the domain",
+            report.axis_v_min,
+            report.combined_bound,
+            r.sustained_worst_case,
+            r.sustained_random.map_or("-".into(), |x| format!("{x:.4}")),
+            r.sustained() / report.combined_bound,
+            own.join(", "),
+            r.left_domain
+        );
+        table.row(vec![
+            format!("{beta}"),
+            report.axis_v_min.iter().map(|v| format!("{v:.4}")).collect::<Vec<_>>().join(", "),
+            format!("{:.4}", report.combined_bound),
+            format!("{:.4}", r.sustained_worst_case),
+            r.sustained_random.map_or("-".into(), |x| format!("{x:.4}")),
+            format!("{:.3}", r.sustained() / report.combined_bound),
+            own.join(", "),
+            format!("{:.4}", r.peak),
+            r.starts.to_string(),
+            r.left_domain.to_string(),
+        ]);
+        reports.push(report);
+    }
+    if let Some(name) = &args.record {
+        let figures = json!({
+            "system": id,
+            "solutions": solutions.iter().map(|(path, s)| json!({
+                "path": path, "system": s.info.system, "params": s.info.params,
+                "resolution": s.grid.axes().iter().map(|a| a.n).collect::<Vec<_>>(), "solved_to": s.info.horizon,
+            })).collect::<Vec<_>>(),
+            "reports": reports,
+        });
+        let path = write_record(
+            &args.results_dir,
+            name,
+            &command_line(),
+            json!({ "rollout": options }),
+            figures,
+            &[("the axes' policies side by side in the full system", &table)],
+        )?;
+        println!("wrote {}", path.display());
+    }
     Ok(())
 }

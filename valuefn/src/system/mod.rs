@@ -379,6 +379,26 @@ impl AffineSystem {
     }
 }
 
+/// One axis of a system's exact decomposition ([`decomposition`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct DecomposedAxis {
+    /// Id of the subsystem solved for this axis (a system of its own in [`by_id`]).
+    pub subsystem: &'static str,
+    /// The axis' coordinates in the full relative state, in the subsystem's order.
+    pub coords: Vec<usize>,
+    /// Index of the full system's parameter that is the subsystem's one parameter.
+    pub param: usize,
+}
+
+/// The exact decomposition of system `id` into subsystems small enough for a grid, if it has one: the axes
+/// partition the state, and [`AffineSystem::subsystem`] on each axis' coordinates is its subsystem.
+pub fn decomposition(id: &str) -> Option<Vec<DecomposedAxis>> {
+    match id {
+        quad10d::ID => Some(quad10d::axes()),
+        _ => None,
+    }
+}
+
 /// Every system the project defines, by id.
 pub fn by_id(id: &str) -> Option<AffineSystem> {
     match id {

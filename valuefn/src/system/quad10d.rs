@@ -17,7 +17,7 @@
 //! under any command, and the velocities are moved by the drift, which state limits cannot hold.
 
 use super::drift::{term, Factor};
-use super::{AffineSystem, Drift, InputDim, ParamDim, StateDim};
+use super::{AffineSystem, DecomposedAxis, Drift, InputDim, ParamDim, StateDim};
 use nalgebra::DMatrix;
 use std::f64::consts::PI;
 
@@ -138,6 +138,16 @@ pub fn x_axis() -> AffineSystem {
     system()
         .subsystem(X_AXIS_ID, "quad10d's x axis (position error, velocity, tilt, tilt rate) tracking a 1-D point planner with speed bound beta_1", &[0, 1, 2, 3])
         .expect("quad10d's x axis decouples")
+}
+
+/// The exact decomposition: the x axis on `r1..r4` with `beta_1`, the same subsystem on `r5..r8` with
+/// `beta_2`, and the z axis on `r9, r10` with `beta_3`.
+pub fn axes() -> Vec<DecomposedAxis> {
+    vec![
+        DecomposedAxis { subsystem: X_AXIS_ID, coords: vec![0, 1, 2, 3], param: 0 },
+        DecomposedAxis { subsystem: X_AXIS_ID, coords: vec![4, 5, 6, 7], param: 1 },
+        DecomposedAxis { subsystem: Z_AXIS_ID, coords: vec![8, 9], param: 2 },
+    ]
 }
 
 /// The largest upward acceleration `k_T THRUST_MAX - g` (m/s^2); the largest downward one is `g`.
