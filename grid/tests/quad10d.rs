@@ -68,7 +68,8 @@ fn axis_policies_side_by_side_hold_each_axis_in_its_own_bound_in_the_full_system
     let solution_of = |axis: &DecomposedAxis| if axis.subsystem == quad10d::Z_AXIS_ID { &z } else { &x };
     let axes: Vec<(DecomposedAxis, &Solution)> =
         decomposition(quad10d::ID).unwrap().into_iter().map(|a| (a.clone(), solution_of(&a))).collect();
-    let options = RolloutOptions { horizon: 20.0, step: 0.002, max_starts: 60, random_planners: 2, ..RolloutOptions::default() };
+    let options =
+        RolloutOptions { horizon: 20.0, step: 0.002, max_starts: 60, random_planners: 2, ..RolloutOptions::default() };
     let report = roll_out_axes(&full, &axes, &options).unwrap();
     eprintln!("{report:?}");
     assert_eq!(report.params, vec![beta; 3]);

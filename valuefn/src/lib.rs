@@ -1,7 +1,8 @@
 //! Value-function models shared by every fastrack crate.
 //!
-//! - [`system`]: control- and planner-affine relative systems (`dubins4d`, the double integrator).
+//! - [`system`]: control- and planner-affine relative systems (`dubins4d`, the double integrator, `quad10d` and its axes).
 //! - [`network`]: the SIREN value network and its f64 reference evaluation.
+//! - [`composite`]: axis networks of a decomposed system (quad10d) combined into one value function.
 //! - [`manifest`], [`bundle`]: the model bundle format and repository layout.
 //! - [`provenance`]: machine, revision and time stamps for manifests and bench records.
 //! - [`record`]: measurement records under `bench/results/`.
@@ -13,6 +14,7 @@
 //! - `runtime` (feature `runtime`): ONNX Runtime loading and a pooled batch evaluator.
 
 pub mod bundle;
+pub mod composite;
 pub mod manifest;
 pub mod network;
 pub mod provenance;

@@ -4,6 +4,7 @@
 //! `control [N, n_control]` (the box minimiser of `grad . G_u u`). The horizon is fixed inside the graph;
 //! input normalisation, `omega_0`, the output scale and `tau` are folded into the weights.
 
+use crate::composite::{Composite, VALUE_FLOOR};
 use crate::network::{FeatureLayout, ValueNetwork};
 use crate::system::AffineSystem;
 use prost::Message;
@@ -246,27 +247,37 @@ fn tensor_info(name: &str, dims: &[Option<usize>]) -> onnx::ValueInfoProto {
     }
 }
 
-/// Writes the ONNX model (serialised `ModelProto`) for `network` evaluated at horizon `tau`, with the
-/// optimal control law of `system`.
-pub fn write_value_graph(network: &ValueNetwork, system: &AffineSystem, tau: f64) -> Vec<u8> {
+/// Wraps the periodic coordinates of `state` (a `[N, n_state]` tensor of `system`'s coordinates):
+/// `s - P floor((s - lo) / P)` on periodic coordinates, `s` elsewhere.
+fn write_wrap(b: &mut GraphBuilder, system: &AffineSystem, state: &str) -> String {
     let n_state = system.n_state();
-    let n_params = system.n_params();
-    let n_control = system.n_control();
-    let n_error = system.error_coords.len();
-    let mut b = GraphBuilder::new();
-
-    // Wrap periodic coordinates: s - m*P*floor((s - lo) / P_safe).
     let lo: Vec<f64> = system.state.iter().map(|d| d.min).collect();
     let period_safe: Vec<f64> = system.state.iter().map(|d| if d.periodic { d.max - d.min } else { 1.0 }).collect();
     let period_masked: Vec<f64> = system.state.iter().map(|d| if d.periodic { d.max - d.min } else { 0.0 }).collect();
     let lo_c = b.constant("domain_min", &[n_state], &lo);
     let ps_c = b.constant("period_safe", &[n_state], &period_safe);
     let pm_c = b.constant("period_masked", &[n_state], &period_masked);
-    let shifted = b.node("Sub", &["state", &lo_c]);
+    let shifted = b.node("Sub", &[state, &lo_c]);
     let cycles = b.node("Div", &[&shifted, &ps_c]);
     let cycles = b.node("Floor", &[&cycles]);
     let offset = b.node("Mul", &[&cycles, &pm_c]);
-    let state_w = b.node("Sub", &["state", &offset]);
+    b.node("Sub", &[state, &offset])
+}
+
+/// Emits `network` at horizon `tau` on the wrapped state `state_w` `[N, n_state]` and `params`
+/// `[N, n_params]` of `system`; returns the value `[N, 1]` and its gradient `[N, n_state]`.
+fn write_network(
+    b: &mut GraphBuilder,
+    network: &ValueNetwork,
+    system: &AffineSystem,
+    tau: f64,
+    state_w: &str,
+    params: &str,
+) -> (String, String) {
+    let n_state = system.n_state();
+    let n_params = system.n_params();
+    let n_error = system.error_coords.len();
+    let state_w = state_w.to_string();
 
     // First layer with normalisation, omega_0 and the fixed tau folded in. Passthrough inputs enter through
     // `a_state` / `a_params`; each circle-encoded coordinate through the cos and sin of its phase.
@@ -292,13 +303,13 @@ pub fn write_value_graph(network: &ValueNetwork, system: &AffineSystem, tau: f64
     let a_state_c = b.constant("w1_state", &[width1, n_state], &a_state);
     let a_params_c = b.constant("w1_params", &[width1, n_params], &a_params);
     let b_first_c = b.constant("b1", &[width1], &b_first);
-    let from_params = b.node_named("Gemm", &["params", &a_params_c, &b_first_c], &[("transB", 1)], None);
+    let from_params = b.node_named("Gemm", &[params, &a_params_c, &b_first_c], &[("transB", 1)], None);
     let from_state = b.node_named("Gemm", &[&state_w, &a_state_c], &[("transB", 1)], None);
     let mut z = b.node("Add", &[&from_state, &from_params]);
     let circles = if layout.circles.is_empty() {
         None
     } else {
-        let circle = write_circle_features(&mut b, &layout, network, &state_w, n_state);
+        let circle = write_circle_features(b, &layout, network, &state_w, n_state);
         z = b.node("Add", &[&z, &circle.contribution]);
         Some(circle)
     };
@@ -371,25 +382,32 @@ pub fn write_value_graph(network: &ValueNetwork, system: &AffineSystem, tau: f64
         let grad_l = b.node("MatMul", &[&unit, &sel_t_c]);
         grad = b.node("Add", &[&grad, &grad_l]);
     }
-    let axes = b.constant_i64("squeeze_axes", &[1]);
-    b.node_named("Squeeze", &[&value_2d, &axes], &[], Some("value"));
-    b.node_named("Identity", &[&grad], &[], Some("grad"));
+    (value_2d, grad)
+}
 
-    // Control law: u_j = lo_j if c_j > 0, hi_j if c_j < 0, midpoint if c_j = 0, with c = grad G_u, over the
-    // range allowed at the state (the box, cut at zero at the state's limits: AffineSystem::control_range).
+/// Emits `system`'s optimal control law `control [N, n_control]` on the wrapped state `state_w` for the
+/// gradient `grad` `[N, n_state]`: `u_j = lo_j` if `c_j > 0`, `hi_j` if `c_j < 0`, the midpoint if `c_j = 0`,
+/// with `c = grad G_u`, over the range allowed at the state (the box, cut at zero at the state's limits:
+/// [`AffineSystem::control_range`]).
+fn write_control_law(b: &mut GraphBuilder, system: &AffineSystem, state_w: &str, grad: &str) {
+    let (n_state, n_control) = (system.n_state(), system.n_control());
     let g_u: Vec<f64> = (0..n_state).flat_map(|i| (0..n_control).map(move |j| system.g_control[(i, j)])).collect();
     let g_u_c = b.constant("g_control", &[n_state, n_control], &g_u);
-    let (u_lo, u_hi) = write_control_range(&mut b, system, &state_w);
+    let (u_lo, u_hi) = write_control_range(b, system, state_w);
     let sum = b.node("Add", &[&u_lo, &u_hi]);
     let half = b.constant("half", &[1], &[0.5]);
     let u_mid = b.node("Mul", &[&sum, &half]);
     let zero = b.constant("zero", &[1], &[0.0]);
-    let coeff = b.node("MatMul", &["grad", &g_u_c]);
+    let coeff = b.node("MatMul", &[grad, &g_u_c]);
     let positive = b.node("Greater", &[&coeff, &zero]);
     let negative = b.node("Less", &[&coeff, &zero]);
     let not_positive = b.node("Where", &[&negative, &u_hi, &u_mid]);
     b.node_named("Where", &[&positive, &u_lo, &not_positive], &[], Some("control"));
+}
 
+/// The serialised `ModelProto` of a graph of the bundle contract for `system`, its nodes and initialisers in `b`.
+fn finish_model(b: GraphBuilder, system: &AffineSystem, doc: String) -> Vec<u8> {
+    let (n_state, n_params, n_control) = (system.n_state(), system.n_params(), system.n_control());
     let graph = onnx::GraphProto {
         name: Some(format!("{}_value", system.id)),
         node: b.nodes,
@@ -407,9 +425,70 @@ pub fn write_value_graph(network: &ValueNetwork, system: &AffineSystem, tau: f64
         opset_import: vec![onnx::OperatorSetIdProto { domain: Some(String::new()), version: Some(OPSET) }],
         producer_name: Some("fastrack".into()),
         producer_version: Some(env!("CARGO_PKG_VERSION").into()),
-        doc_string: Some(format!("SIREN value function of {} at horizon {tau} s", system.id)),
+        doc_string: Some(doc),
         graph: Some(graph),
         ..Default::default()
     };
     model.encode_to_vec()
+}
+
+/// Writes the ONNX model (serialised `ModelProto`) for `network` evaluated at horizon `tau`, with the
+/// optimal control law of `system`.
+pub fn write_value_graph(network: &ValueNetwork, system: &AffineSystem, tau: f64) -> Vec<u8> {
+    let mut b = GraphBuilder::new();
+    let state_w = write_wrap(&mut b, system, "state");
+    let (value_2d, grad) = write_network(&mut b, network, system, tau, &state_w, "params");
+    let axes = b.constant_i64("squeeze_axes", &[1]);
+    b.node_named("Squeeze", &[&value_2d, &axes], &[], Some("value"));
+    b.node_named("Identity", &[&grad], &[], Some("grad"));
+    write_control_law(&mut b, system, &state_w, "grad");
+    finish_model(b, system, format!("SIREN value function of {} at horizon {tau} s", system.id))
+}
+
+/// Writes the ONNX model of a [`Composite`]: each axis network on its gathered coordinates and parameter,
+/// combined into `value` and `grad` and the control law as [`Composite::evaluate`] does.
+pub fn write_composite_graph(composite: &Composite) -> Vec<u8> {
+    let system = composite.system();
+    let n_state = system.n_state();
+    let mut b = GraphBuilder::new();
+    let state_w = write_wrap(&mut b, system, "state");
+    let zero = b.constant("zero_value", &[1], &[0.0]);
+    // Per axis: max(V_a, 0) [N, 1], dV_a/dr_a [N, k] and the [k, n_state] map back into the full state.
+    let mut parts = Vec::new();
+    let mut squares = zero.clone();
+    for a in composite.axes() {
+        let coords: Vec<i64> = a.axis.coords.iter().map(|&i| i as i64).collect();
+        let coords_c = b.constant_i64("axis_coords", &coords);
+        let sub_state = b.node_named("Gather", &[&state_w, &coords_c], &[("axis", 1)], None);
+        let param_c = b.constant_i64("axis_param", &[a.axis.param as i64]);
+        let sub_params = b.node_named("Gather", &["params", &param_c], &[("axis", 1)], None);
+        let (value, grad) = write_network(&mut b, &a.network, &a.subsystem, a.tau, &sub_state, &sub_params);
+        let value = b.node("Max", &[&value, &zero]);
+        let square = b.node("Mul", &[&value, &value]);
+        squares = b.node("Add", &[&squares, &square]);
+        let k = coords.len();
+        let scatter: Vec<f64> =
+            (0..k).flat_map(|j| (0..n_state).map(move |i| if a.axis.coords[j] == i { 1.0 } else { 0.0 })).collect();
+        let scatter_c = b.constant("axis_scatter", &[k, n_state], &scatter);
+        parts.push((value, grad, scatter_c));
+    }
+    let value_2d = b.node("Sqrt", &[&squares]);
+    let floor = b.constant("value_floor", &[1], &[VALUE_FLOOR]);
+    let value_safe = b.node("Max", &[&value_2d, &floor]);
+    let no_gradient = b.constant("zero_gradient", &[1, n_state], &vec![0.0; n_state]);
+    let (mut grad, mut axis_grad) = (no_gradient.clone(), no_gradient);
+    for (value, axis_gradient, scatter) in parts {
+        let weight = b.node("Div", &[&value, &value_safe]);
+        let weighted = b.node("Mul", &[&axis_gradient, &weight]);
+        let placed = b.node("MatMul", &[&weighted, &scatter]);
+        let placed_raw = b.node("MatMul", &[&axis_gradient, &scatter]);
+        grad = b.node("Add", &[&grad, &placed]);
+        axis_grad = b.node("Add", &[&axis_grad, &placed_raw]);
+    }
+    let axes = b.constant_i64("squeeze_axes", &[1]);
+    b.node_named("Squeeze", &[&value_2d, &axes], &[], Some("value"));
+    b.node_named("Identity", &[&grad], &[], Some("grad"));
+    write_control_law(&mut b, system, &state_w, &axis_grad);
+    let taus: Vec<String> = composite.axes().iter().map(|a| format!("{} at {} s", a.subsystem.id, a.tau)).collect();
+    finish_model(b, system, format!("{} composed of SIREN axis value functions: {}", system.id, taus.join(", ")))
 }

@@ -1,10 +1,11 @@
 //! A graph written by the ONNX writer, run by ONNX Runtime through the evaluator, against an independent
 //! f64 evaluation of the same network, finite differences, and the system's control law.
 
+use fastrack_valuefn::composite::{AxisNetwork, Composite, CompositeError};
 use fastrack_valuefn::network::{NetworkShape, PeriodicEncoding, ValueNetwork};
-use fastrack_valuefn::onnx_writer::write_value_graph;
+use fastrack_valuefn::onnx_writer::{write_composite_graph, write_value_graph};
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
-use fastrack_valuefn::system::{double_integrator, dubins4d, AffineSystem};
+use fastrack_valuefn::system::{by_id, decomposition, double_integrator, dubins4d, quad10d, AffineSystem};
 use rand::{Rng, SeedableRng};
 
 const N: usize = 1000;
@@ -144,4 +145,101 @@ fn exact_boundary_graph_wraps_periodic_state() {
     let a = evaluator.evaluate(&[0.5, -0.3, 1.0, 1.2], &[0.8, 0.9]).unwrap();
     let b = evaluator.evaluate(&[0.5, -0.3, 1.0 + 2.0 * std::f32::consts::PI, 1.2], &[0.8, 0.9]).unwrap();
     assert!((a.value[0] - b.value[0]).abs() < 1e-5, "{} vs {}", a.value[0], b.value[0]);
+}
+
+/// quad10d's axes, each with a random network of its subsystem.
+fn random_axes(seed: u64) -> Vec<AxisNetwork> {
+    decomposition(quad10d::ID)
+        .unwrap()
+        .into_iter()
+        .zip(seed..)
+        .map(|(axis, seed)| {
+            let subsystem = by_id(axis.subsystem).unwrap();
+            let network = ValueNetwork::random(&subsystem, &NetworkShape::new(&[64, 64], 30.0, true), 2.0, seed);
+            AxisNetwork { axis, subsystem, network, tau: 1.3 }
+        })
+        .collect()
+}
+
+#[test]
+fn quad10d_composite_graph_matches_its_reference_finite_differences_and_the_axes_controls() {
+    let system = quad10d::system();
+    let composite = Composite::new(system.clone(), random_axes(40)).unwrap();
+    let onnx = write_composite_graph(&composite);
+    let dims = GraphDims::of_system(&system);
+    let evaluator =
+        Evaluator::new(runtime(None).expect("ONNX Runtime (scripts/setup-onnxruntime.sh)"), &onnx, dims, 1).unwrap();
+    let (states, params) = random_batch(&system, N, 41);
+    let out = evaluator.evaluate(&states, &params).unwrap();
+    let (ns, np, nc) = (dims.n_state, dims.n_params, dims.n_control);
+    let (mut worst_value, mut worst_grad, mut compared) = (0.0f64, 0.0f64, 0);
+    let h = 1e-5;
+    for i in 0..N {
+        let s: Vec<f64> = states[i * ns..(i + 1) * ns].iter().map(|&x| x.into()).collect();
+        let p: Vec<f64> = params[i * np..(i + 1) * np].iter().map(|&x| x.into()).collect();
+        let reference = composite.evaluate(&s, &p);
+        // The value from the axis networks themselves: sqrt of the sum of their clamped squares.
+        let by_axes = composite
+            .axes()
+            .iter()
+            .map(|a| {
+                let sub: Vec<f64> = a.axis.coords.iter().map(|&j| s[j]).collect();
+                a.network.evaluate(a.tau, &sub, &[p[a.axis.param]]).value.max(0.0).powi(2)
+            })
+            .sum::<f64>()
+            .sqrt();
+        assert!((reference.value - by_axes).abs() < 1e-12);
+        worst_value = worst_value.max((f64::from(out.value[i]) - by_axes).abs() / by_axes.max(1.0));
+        let got: Vec<f64> = out.control[i * nc..(i + 1) * nc].iter().map(|&x| x.into()).collect();
+        // grad vs central differences of the f64 composite, away from kinks: each axis' |e| at 0 and the clamp
+        // of a value at 0.
+        let clear = composite.axes().iter().all(|a| {
+            let sub: Vec<f64> = a.axis.coords.iter().map(|&j| s[j]).collect();
+            a.subsystem.tracking_error(&sub) > 1e-3 && a.network.evaluate(a.tau, &sub, &[p[a.axis.param]]).value > 1e-3
+        });
+        if !clear {
+            // Where an axis' value is clamped at 0 its share of the composite's grad is 0, and the control is
+            // still that axis' law on its own gradient (in f32, as the graph computes the bounds).
+            let reference_f32: Vec<f64> = reference.control.iter().map(|&u| f64::from(u as f32)).collect();
+            assert_eq!(got, reference_f32, "control of item {i}");
+            continue;
+        }
+        compared += 1;
+        let g = &out.grad[i * ns..(i + 1) * ns];
+        let scale = g.iter().map(|x| f64::from(*x).abs()).fold(0.0, f64::max).max(1e-2);
+        for j in 0..ns {
+            let (mut a, mut b) = (s.clone(), s.clone());
+            a[j] += h;
+            b[j] -= h;
+            let fd = (composite.evaluate(&a, &p).value - composite.evaluate(&b, &p).value) / (2.0 * h);
+            worst_grad = worst_grad.max((fd - f64::from(g[j])).abs() / scale);
+        }
+        // Where every axis' value is positive, the control is the system's law on the composite's grad.
+        let grad: Vec<f64> = g.iter().map(|&x| x.into()).collect();
+        let expected: Vec<f64> = system.optimal_control(&s, &grad).iter().map(|&u| f64::from(u as f32)).collect();
+        assert_eq!(got, expected, "control of item {i}");
+    }
+    eprintln!("quad10d composite: value err {worst_value:.2e}, grad err {worst_grad:.2e} over {compared} items");
+    assert!(worst_value < 1e-5, "value vs the axes: worst relative error {worst_value:e}");
+    assert!(compared > N / 4, "only {compared} items away from the kinks");
+    assert!(worst_grad < 1e-3, "grad vs central differences: worst relative error {worst_grad:e}");
+}
+
+#[test]
+fn a_composite_takes_the_decomposition_s_axes_in_order_and_nothing_else() {
+    let system = quad10d::system();
+    let mut swapped = random_axes(50);
+    swapped.swap(0, 2);
+    assert!(matches!(Composite::new(system.clone(), swapped), Err(CompositeError::Axis { index: 0, .. })));
+    let mut short = random_axes(50);
+    short.pop();
+    let error = Composite::new(system.clone(), short).unwrap_err();
+    assert!(error.to_string().contains("2 axes given; quad10d has 3"), "{error}");
+    let mut wrong_network = random_axes(50);
+    let dubins = dubins4d::system();
+    wrong_network[2].network = ValueNetwork::random(&dubins, &NetworkShape::new(&[8], 30.0, true), 2.0, 1);
+    let error = Composite::new(system, wrong_network).unwrap_err();
+    assert!(error.to_string().contains("the network takes 4 state coordinates and 2 parameters"), "{error}");
+    let error = Composite::new(dubins, random_axes(50)).unwrap_err();
+    assert_eq!(error, CompositeError::NotDecomposed("dubins4d".into()));
 }
