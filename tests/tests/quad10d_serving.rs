@@ -126,7 +126,7 @@ async fn one_server_serves_dubins4d_and_quad10d_and_refuses_bad_quad_input() {
     expect_error(evaluate(nan, vec![1.0; 3]).await, Code::InvalidArgument, &["states[9]", "v_z", "NaN"]);
     let mut high = ok_state.clone();
     high[8] = 3.0;
-    expect_error(evaluate(high, vec![1.0; 3]).await, Code::OutOfRange, &["states[8]", "z_r", "[-2.5, 2.5]"]);
+    expect_error(evaluate(high, vec![1.0; 3]).await, Code::OutOfRange, &["states[8]", "z_r", "[-1.5, 1.5]"]);
     expect_error(
         client.tracking_error_bound(quad(), 1.6, 0).await,
         Code::InvalidArgument,

@@ -19,9 +19,10 @@ pub struct Args {
     /// Planner speed bounds, comma separated.
     #[arg(long, value_delimiter = ',', default_value = "0.5,0.875,1.25")]
     betas: Vec<f64>,
-    /// Uniform resolutions, comma separated (overrides --resolution).
-    #[arg(long, value_delimiter = ',')]
-    resolutions: Vec<usize>,
+    /// Resolutions, comma separated (overrides --resolution): each one number for every axis or one per
+    /// axis joined by `x`, e.g. `21,31` or `21x21x15x15,27x27x19x19`.
+    #[arg(long, value_delimiter = ',', value_parser = parse_resolution)]
+    resolutions: Vec<Vec<usize>>,
     /// Horizons at which `V_min` is tabulated (s), comma separated.
     #[arg(long, value_delimiter = ',', default_value = "5,10,15,20,25,30")]
     at: Vec<f64>,
@@ -36,6 +37,11 @@ pub struct Args {
     /// over the preceding window of this length (s).
     #[arg(long, default_value_t = 5.0)]
     vmin_window: f64,
+    /// Multiply --tolerance and --report-tolerance by each `beta`: the rate `dV/dtau` of a system whose
+    /// error scales like `beta^2` and time like `beta` (a double integrator) scales like `beta`, so one
+    /// relative setting serves every row.
+    #[arg(long)]
+    tolerance_per_beta: bool,
     #[command(flatten)]
     outputs: StudyOutputs,
 }
@@ -109,24 +115,36 @@ fn vmin_settled(history: &[HistoryPoint], tolerance: f64, window: f64) -> Option
         .copied()
 }
 
+/// One resolution: `31` or `31x31x21x21`.
+fn parse_resolution(text: &str) -> Result<Vec<usize>, String> {
+    text.split('x')
+        .map(|n| {
+            n.trim().parse::<usize>().map_err(|_| format!("`{text}`: expected nodes per axis like 31 or 31x31x21x21"))
+        })
+        .collect()
+}
+
 /// Runs `horizon`.
 pub fn run(args: Args) -> anyhow::Result<()> {
     let system = args.solve.system()?;
     let set = args.solve.config().converge_on.unwrap_or(ConvergenceSet::DIAGNOSTIC);
-    let resolutions: Vec<Vec<usize>> = if args.resolutions.is_empty() {
-        vec![args.solve.resolution.clone()]
-    } else {
-        args.resolutions.iter().map(|&n| vec![n]).collect()
-    };
+    let resolutions: Vec<Vec<usize>> =
+        if args.resolutions.is_empty() { vec![args.solve.resolution.clone()] } else { args.resolutions.clone() };
     let mut studies = Vec::new();
     for resolution in &resolutions {
         for &beta in &args.betas {
-            let options = SolveOptions { resolution: resolution.clone(), ..args.solve.clone() };
+            let scale = if args.tolerance_per_beta { beta } else { 1.0 };
+            let options = SolveOptions {
+                resolution: resolution.clone(),
+                tolerance: args.solve.tolerance * scale,
+                ..args.solve.clone()
+            };
             let solution = solve_or_load(&system, &options, beta, &args.outputs.solutions_dir)?;
             let label = solution.grid.axes().iter().map(|a| a.n.to_string()).collect::<Vec<_>>().join("x");
             let windowed = solution.info.config.rate_window > 0.0;
-            let settled = settled(&solution.info.history, windowed, args.report_tolerance, args.report_settle_time);
-            let vmin_settled = vmin_settled(&solution.info.history, args.report_tolerance, args.vmin_window);
+            let report_tolerance = args.report_tolerance * scale;
+            let settled = settled(&solution.info.history, windowed, report_tolerance, args.report_settle_time);
+            let vmin_settled = vmin_settled(&solution.info.history, report_tolerance, args.vmin_window);
             let last = solution.info.history.last();
             println!(
                 "{label} beta={beta}: V_min {:.4} at {:.1} s, set rate {} (grid {}){}, settled {}, wall {:.1} s",
@@ -259,6 +277,7 @@ fn write_outputs(args: &Args, set: ConvergenceSet, studies: &[Study], name: &str
     let config = json!({
         "system": system.id, "betas": args.betas, "resolutions": args.resolutions, "solver": args.solve.config(),
         "convergence_set": set, "report_tolerance": args.report_tolerance,
+        "tolerance_per_beta": args.tolerance_per_beta,
         "report_settle_time": args.report_settle_time, "vmin_window": args.vmin_window, "bounds": args.solve.bounds,
     });
     let path = write_record(

@@ -50,14 +50,15 @@ pub const BETA_RANGE: (f64, f64) = (0.5, 1.5);
 pub const POSITION_HALF_WIDTH: f64 = 5.0;
 /// Half-width of each horizontal velocity domain (m/s).
 pub const VELOCITY_HALF_WIDTH: f64 = 4.0;
-/// Half-width of the tilt domain (rad): above [`TILT_MAX`], which bounds the tilt from rest.
-pub const TILT_HALF_WIDTH: f64 = 0.4;
+/// Half-width of the tilt domain (rad): above [`TILT_MAX`], which bounds the tilt from rest, with room for
+/// the states of the error set that are not reached from rest.
+pub const TILT_HALF_WIDTH: f64 = 0.5;
 /// Half-width of the tilt-rate state's domain: above `8 TILT_MAX` (2.79), which bounds it from rest.
-pub const TILT_RATE_HALF_WIDTH: f64 = 3.5;
-/// Half-width of the vertical position-error domain (m): four times the z axis' bound at `beta_u`.
-pub const VERTICAL_POSITION_HALF_WIDTH: f64 = 2.5;
+pub const TILT_RATE_HALF_WIDTH: f64 = 4.5;
+/// Half-width of the vertical position-error domain (m): 2.4 times the z axis' bound at `beta_u` (0.63 m).
+pub const VERTICAL_POSITION_HALF_WIDTH: f64 = 1.5;
 /// Half-width of the vertical velocity domain (m/s).
-pub const VERTICAL_VELOCITY_HALF_WIDTH: f64 = 3.0;
+pub const VERTICAL_VELOCITY_HALF_WIDTH: f64 = 2.5;
 
 fn symmetric(name: &'static str, unit: &'static str, half_width: f64) -> StateDim {
     StateDim { name, unit, min: -half_width, max: half_width, periodic: false, limits: None }
