@@ -27,7 +27,8 @@ pub fn hand_made_table(system: &AffineSystem) -> Vec<TebRow> {
                 level,
                 measured_min: level,
                 extent: vec![0.5 * level; system.error_coords.len()],
-                boundary_radii: vec![0.8 * level; if system.error_coords.len() == 2 { 16 } else { 2 }],
+                // Radii per direction of `boundary_directions`: 2 for 1-D error sets, 16 for 2-D, none above.
+                boundary_radii: vec![0.8 * level; [0, 2, 16].get(system.error_coords.len()).copied().unwrap_or(0)],
                 verification: None,
             }
         })

@@ -127,6 +127,14 @@ async fn one_server_serves_dubins4d_and_quad10d_and_refuses_bad_quad_input() {
     let mut high = ok_state.clone();
     high[8] = 3.0;
     expect_error(evaluate(high, vec![1.0; 3]).await, Code::OutOfRange, &["states[8]", "z_r", "[-1.5, 1.5]"]);
+    // Its 3-D error set has a radius and an extent per axis but no boundary curve to draw.
+    let teb = client.tracking_error_bound(quad(), 1.0, 0).await.unwrap();
+    assert_eq!(teb.extent.len(), 3);
+    expect_error(
+        client.tracking_error_bound(quad(), 1.0, 8).await,
+        Code::InvalidArgument,
+        &["boundary points exist for 1-D and 2-D error spaces", "has 3 dimensions", "boundary_points = 0"],
+    );
     expect_error(
         client.tracking_error_bound(quad(), 1.6, 0).await,
         Code::InvalidArgument,
