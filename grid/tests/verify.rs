@@ -143,6 +143,7 @@ fn write_bundle(
             omega_0: 1.0,
             exact_boundary: false,
             periodic_encoding: PeriodicEncoding::Wrap,
+            axes: Vec::new(),
         },
         teb_table,
         untrained: false,

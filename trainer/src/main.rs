@@ -5,9 +5,10 @@ use clap::{Parser, Subcommand};
 use fastrack_trainer::config::TrainConfig;
 use fastrack_trainer::export;
 use fastrack_trainer::train::{checkpoint_network, train, RunDir, TrainOptions};
+use fastrack_valuefn::composite::{AxisNetwork, Composite};
 use fastrack_valuefn::manifest::Provenance;
 use fastrack_valuefn::network::{FeatureLayout, NetworkShape, ValueNetwork};
-use fastrack_valuefn::system::{by_id, SYSTEM_IDS};
+use fastrack_valuefn::system::{by_id, decomposition, SYSTEM_IDS};
 use fastrack_valuefn::teb::TebOptions;
 use std::collections::BTreeMap;
 use std::path::PathBuf;
@@ -92,6 +93,26 @@ enum Command {
         #[arg(long, default_value = "models")]
         out: PathBuf,
     },
+    /// Composes runs trained on the axes of a decomposed system (quad10d) into one bundle of the full system:
+    /// `V = sqrt(sum V_a^2)` over the axes, each axis' network from the run trained on its subsystem.
+    Compose {
+        /// The decomposed system.
+        #[arg(long, default_value = "quad10d")]
+        system: String,
+        /// A run directory per subsystem (repeatable); an axis takes the run of its subsystem (quad10d's x and y
+        /// axes share one).
+        #[arg(long = "axis-run", required = true)]
+        axis_runs: Vec<PathBuf>,
+        /// Model name.
+        #[arg(long, default_value = "quad10d")]
+        name: String,
+        /// Model version.
+        #[arg(long, default_value_t = 1)]
+        version: u32,
+        /// Repository root to write into.
+        #[arg(long, default_value = "models")]
+        out: PathBuf,
+    },
     /// Draws a bundle's TEB table (served level, measured `V_min`) against `beta`, with grid solutions'
     /// `V_min` beside it.
     PlotTeb {
@@ -147,9 +168,8 @@ fn main() -> anyhow::Result<()> {
                 0.0,
             );
             let request = export::ExportRequest {
-                network: &network,
+                model: export::ExportedModel::Network { network: &network, horizon },
                 system: &system,
-                horizon,
                 name: &name,
                 version,
                 untrained: true,
@@ -200,6 +220,10 @@ fn main() -> anyhow::Result<()> {
             fastrack_trainer::report::plot_teb(&out, &manifest.teb_table, &[("grid V_min", grid)])?;
             println!("{}", out.display());
         }
+        Command::Compose { system, axis_runs, name, version, out } => {
+            let dir = compose(&system, &axis_runs, &name, version, &out)?;
+            println!("{}", dir.display());
+        }
         Command::Export { run_dir, out } => {
             let run = RunDir(run_dir);
             let (network, state) = checkpoint_network(&run, &burn::tensor::Device::flex())?;
@@ -225,9 +249,8 @@ fn main() -> anyhow::Result<()> {
                 state.wall_time_s,
             );
             let request = export::ExportRequest {
-                network: &network,
+                model: export::ExportedModel::Network { network: &network, horizon: state.config.sampling.tau_max },
                 system: &system,
-                horizon: state.config.sampling.tau_max,
                 name: &state.config.export.name,
                 version: state.config.export.version,
                 untrained: false,
@@ -241,6 +264,68 @@ fn main() -> anyhow::Result<()> {
         }
     }
     Ok(())
+}
+
+/// `compose`: the axes' runs of a decomposed system exported as one composite bundle.
+fn compose(
+    id: &str,
+    axis_runs: &[PathBuf],
+    name: &str,
+    version: u32,
+    out: &std::path::Path,
+) -> anyhow::Result<PathBuf> {
+    let system = by_id(id).with_context(|| format!("unknown system {id:?}; known: {}", SYSTEM_IDS.join(", ")))?;
+    let axes = decomposition(id).with_context(|| format!("system {id:?} has no decomposition into axes"))?;
+    let device = burn::tensor::Device::flex();
+    let mut runs = Vec::new();
+    for dir in axis_runs {
+        let run = RunDir(dir.clone());
+        let (network, state) = checkpoint_network(&run, &device)?;
+        runs.push((dir.clone(), network, state));
+    }
+    let mut networks = Vec::new();
+    for axis in &axes {
+        let mut matching = runs.iter().filter(|(_, _, s)| s.config.system == axis.subsystem);
+        let (_, network, state) = matching
+            .next()
+            .with_context(|| format!("no --axis-run was trained on `{}` (an axis of {id})", axis.subsystem))?;
+        if let Some((other, _, _)) = matching.next() {
+            anyhow::bail!("two runs were trained on `{}`; give one ({})", axis.subsystem, other.display());
+        }
+        let subsystem = state.config.system()?;
+        networks.push(AxisNetwork {
+            axis: axis.clone(),
+            subsystem,
+            network: network.clone(),
+            tau: state.config.sampling.tau_max,
+        });
+    }
+    if let Some((dir, _, state)) = runs.iter().find(|(_, _, s)| !axes.iter().any(|a| a.subsystem == s.config.system)) {
+        anyhow::bail!("{} was trained on `{}`, which is not an axis of {id}", dir.display(), state.config.system);
+    }
+    let composite = Composite::new(system.clone(), networks)?;
+    let configs: Vec<serde_json::Value> =
+        runs.iter().map(|(_, _, s)| serde_json::to_value(&s.config)).collect::<Result<_, _>>()?;
+    let provenance = Provenance::here_and_now(
+        format!(
+            "DeepReach per axis of {id} ({} runs, supervised by grid solutions where configured), burn",
+            runs.len()
+        ),
+        serde_json::json!({ "axes": configs }),
+        runs.iter().map(|(_, _, s)| s.iteration).sum(),
+        BTreeMap::new(),
+        runs.iter().map(|(_, _, s)| s.wall_time_s).sum(),
+    );
+    let request = export::ExportRequest {
+        model: export::ExportedModel::Composite(&composite),
+        system: &system,
+        name,
+        version,
+        untrained: false,
+        provenance,
+        teb: TebOptions::default(),
+    };
+    export::export(out, request)
 }
 
 /// Runs the training-speed benchmark and writes its record.

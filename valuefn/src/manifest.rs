@@ -1,5 +1,6 @@
 //! `manifest.json` of a model bundle: versioned schema, serde types and validation with precise errors.
 
+use crate::composite::Composite;
 use crate::network::{PeriodicEncoding, ValueNetwork};
 use crate::system::{AffineSystem, Coordinate, StateSpace};
 use nalgebra::DMatrix;
@@ -96,17 +97,44 @@ pub struct RangeDimension {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct NetworkInfo {
-    /// Architecture, `siren`.
+    /// Architecture: `siren` (one network), or [`COMPOSITE_KIND`] (one SIREN per axis of a decomposed system,
+    /// combined as `sqrt(sum V_a^2)`; each described in `axes`).
     pub kind: String,
-    /// Hidden layer widths.
+    /// Hidden layer widths (a composite: none; its axes have theirs).
     pub hidden: Vec<usize>,
-    /// SIREN frequency `omega_0`.
+    /// SIREN frequency `omega_0` (a composite: its first axis').
     pub omega_0: f64,
-    /// `V = l(r) + tau * NN` (exact boundary condition) instead of `V = NN`.
+    /// `V = l(r) + tau * NN` (exact boundary condition) instead of `V = NN` (a composite: on every axis).
     pub exact_boundary: bool,
     /// How periodic state coordinates enter the first layer (bundles written before it was recorded: `wrap`).
     #[serde(default = "wrapped")]
     pub periodic_encoding: PeriodicEncoding,
+    /// A composite's axis networks, in the decomposition's order (empty for one network).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub axes: Vec<AxisNetworkInfo>,
+}
+
+/// [`NetworkInfo::kind`] of a composite of axis networks.
+pub const COMPOSITE_KIND: &str = "siren-axes";
+
+/// One axis network of a composite bundle.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct AxisNetworkInfo {
+    /// The subsystem the network was trained on.
+    pub subsystem: String,
+    /// Its coordinates in the full state.
+    pub coords: Vec<usize>,
+    /// The full system's parameter it takes.
+    pub param: usize,
+    /// The horizon it is evaluated at (s).
+    pub horizon: f64,
+    /// Hidden layer widths.
+    pub hidden: Vec<usize>,
+    /// SIREN frequency `omega_0`.
+    pub omega_0: f64,
+    /// Exact boundary condition.
+    pub exact_boundary: bool,
 }
 
 fn wrapped() -> PeriodicEncoding {
@@ -122,6 +150,35 @@ impl NetworkInfo {
             omega_0: network.omega_0,
             exact_boundary: network.exact_boundary,
             periodic_encoding: network.periodic_encoding,
+            axes: Vec::new(),
+        }
+    }
+
+    /// The description of a composite of axis networks.
+    pub fn describe_composite(composite: &Composite) -> Self {
+        let axes: Vec<AxisNetworkInfo> = composite
+            .axes()
+            .iter()
+            .map(|a| AxisNetworkInfo {
+                subsystem: a.subsystem.id.into(),
+                coords: a.axis.coords.clone(),
+                param: a.axis.param,
+                horizon: a.tau,
+                hidden: a.network.hidden_widths(),
+                omega_0: a.network.omega_0,
+                exact_boundary: a.network.exact_boundary,
+            })
+            .collect();
+        Self {
+            kind: COMPOSITE_KIND.into(),
+            hidden: Vec::new(),
+            omega_0: axes.first().map_or(0.0, |a| a.omega_0),
+            exact_boundary: axes.iter().all(|a| a.exact_boundary),
+            periodic_encoding: composite
+                .axes()
+                .first()
+                .map_or(PeriodicEncoding::Circle, |a| a.network.periodic_encoding),
+            axes,
         }
     }
 }
@@ -428,6 +485,30 @@ impl Manifest {
         }
         if self.network.omega_0 <= 0.0 || self.network.hidden.contains(&0) {
             return fail("network", "omega_0 must be > 0 and hidden widths > 0");
+        }
+        if (self.network.kind == COMPOSITE_KIND) == self.network.axes.is_empty() {
+            return fail("network.axes", format!("a `{COMPOSITE_KIND}` network lists its axes, and only it does"));
+        }
+        for (i, a) in self.network.axes.iter().enumerate() {
+            if a.omega_0 <= 0.0
+                || a.hidden.is_empty()
+                || a.hidden.contains(&0)
+                || !(a.horizon.is_finite() && a.horizon > 0.0)
+            {
+                return fail(format!("network.axes[{i}]"), "omega_0 and horizon must be > 0 and hidden widths > 0");
+            }
+            if let Some(&c) = a.coords.iter().find(|&&c| c >= self.state.len()) {
+                return fail(
+                    format!("network.axes[{i}].coords"),
+                    format!("coordinate {c} is not below n_state = {}", self.state.len()),
+                );
+            }
+            if a.param >= self.params.len() {
+                return fail(
+                    format!("network.axes[{i}].param"),
+                    format!("{} is not below n_params = {}", a.param, self.params.len()),
+                );
+            }
         }
         self.validate_teb_table(beta_l, beta_u)?;
         if self.onnx_sha256.len() != 64

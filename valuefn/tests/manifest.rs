@@ -1,7 +1,9 @@
 //! Manifest validation and bundle checks: each failure names its field or file.
 
 use fastrack_valuefn::bundle::{Bundle, BundleError};
-use fastrack_valuefn::manifest::{Manifest, NetworkInfo, Provenance, SystemInfo, TebRow, SCHEMA_VERSION};
+use fastrack_valuefn::manifest::{
+    AxisNetworkInfo, Manifest, NetworkInfo, Provenance, SystemInfo, TebRow, COMPOSITE_KIND, SCHEMA_VERSION,
+};
 use fastrack_valuefn::network::PeriodicEncoding;
 use fastrack_valuefn::system::dubins4d;
 
@@ -24,6 +26,7 @@ fn manifest() -> Manifest {
             omega_0: 30.0,
             exact_boundary: true,
             periodic_encoding: PeriodicEncoding::Circle,
+            axes: Vec::new(),
         },
         teb_table: (0..16)
             .map(|k| TebRow {
@@ -88,6 +91,22 @@ fn each_invariant_names_its_field() {
     let mut m = manifest();
     m.planner_to_state.pop();
     assert!(field_error(m).starts_with("planner_to_state: must have one row per state coordinate (4), got 3"));
+    let mut m = manifest();
+    m.network.kind = COMPOSITE_KIND.into();
+    assert!(field_error(m).starts_with("network.axes: a `siren-axes` network lists its axes, and only it does"));
+    let mut m = manifest();
+    m.network.axes.push(AxisNetworkInfo {
+        subsystem: "x".into(),
+        coords: vec![0, 4],
+        param: 0,
+        horizon: 1.0,
+        hidden: vec![8],
+        omega_0: 30.0,
+        exact_boundary: true,
+    });
+    assert!(field_error(m.clone()).starts_with("network.axes: a `siren-axes`"), "axes on a plain siren");
+    m.network.kind = COMPOSITE_KIND.into();
+    assert!(field_error(m).starts_with("network.axes[0].coords: coordinate 4 is not below n_state = 4"));
     let mut m = manifest();
     m.onnx_sha256 = "ABC".into();
     assert!(field_error(m).starts_with("onnx_sha256: must be 64 lowercase hex digits"));
