@@ -183,70 +183,65 @@ struct Reached {
     left: bool,
 }
 
-/// One rollout from `start` with the tracker policy of `field`; `groups` are sets of error coordinates whose
-/// own errors are tracked besides the whole error.
-#[allow(clippy::too_many_arguments)]
-fn roll_out(
-    system: &AffineSystem,
-    field: &dyn GradientField,
-    params: &[f64],
-    start: &[f64],
-    mut planner: Planner,
-    rng: &mut StdRng,
-    groups: &[Vec<usize>],
-    options: &RolloutOptions,
-) -> Reached {
-    let n = start.len();
-    let (mut r, mut p) = (start.to_vec(), vec![0.0; n]);
-    let steps = (options.horizon / options.step).round() as usize;
-    let mut reached = Reached {
-        sustained: 0.0,
-        peak: system.tracking_error(&r),
-        group_sustained: vec![0.0; groups.len()],
-        left: false,
-    };
-    let d = vec![0.0; system.disturbances.len()];
-    for k in 0..steps {
-        let t = k as f64 * options.step;
-        field.gradient(&r, &mut p);
-        let u = system.optimal_control(&r, &p);
-        let u_p = planner.input(system, params, &p, t, options.mean_dwell, rng);
-        step_relative(system, &mut r, HeldInputs { control: &u, planner: &u_p, disturbance: &d }, options.step);
-        let error = system.tracking_error(&r);
-        reached.peak = reached.peak.max(error);
-        if 2 * (k + 1) > steps {
-            reached.sustained = reached.sustained.max(error);
-            for (held, group) in reached.group_sustained.iter_mut().zip(groups) {
-                *held = held.max(group.iter().map(|&i| r[i] * r[i]).sum::<f64>().sqrt());
-            }
-        }
-        reached.left |= field.outside(&r);
-    }
-    reached
+/// What every rollout of one check shares: the system, the tracker policy, the parameters, the groups of
+/// error coordinates whose own errors are tracked besides the whole error, and the options.
+struct Scene<'a> {
+    system: &'a AffineSystem,
+    field: &'a dyn GradientField,
+    params: &'a [f64],
+    groups: &'a [Vec<usize>],
+    options: &'a RolloutOptions,
 }
 
-/// Every start rolled out against the worst-case planner and `options.random_planners` random ones, on the
-/// cores: `(planner is worst-case, what it reached)` per rollout.
-fn roll_out_starts(
-    system: &AffineSystem,
-    field: &dyn GradientField,
-    params: &[f64],
-    starts: &[Vec<f64>],
-    groups: &[Vec<usize>],
-    options: &RolloutOptions,
-) -> Vec<(bool, Reached)> {
-    starts
-        .par_iter()
-        .enumerate()
-        .flat_map_iter(|(i, start)| {
-            (0..=options.random_planners).map(move |j| {
-                let planner = if j == 0 { Planner::WorstCase } else { Planner::bang_bang() };
-                let seed = options.seed ^ ((i * (options.random_planners + 1) + j) as u64).wrapping_mul(0x9E37_79B9);
-                let mut rng = StdRng::seed_from_u64(seed);
-                (j == 0, roll_out(system, field, params, start, planner, &mut rng, groups, options))
+impl Scene<'_> {
+    /// One rollout from `start` against `planner`.
+    fn roll_out(&self, start: &[f64], mut planner: Planner, rng: &mut StdRng) -> Reached {
+        let (system, options) = (self.system, self.options);
+        let (mut r, mut p) = (start.to_vec(), vec![0.0; start.len()]);
+        let steps = (options.horizon / options.step).round() as usize;
+        let mut reached = Reached {
+            sustained: 0.0,
+            peak: system.tracking_error(&r),
+            group_sustained: vec![0.0; self.groups.len()],
+            left: false,
+        };
+        let d = vec![0.0; system.disturbances.len()];
+        for k in 0..steps {
+            let t = k as f64 * options.step;
+            self.field.gradient(&r, &mut p);
+            let u = system.optimal_control(&r, &p);
+            let u_p = planner.input(system, self.params, &p, t, options.mean_dwell, rng);
+            step_relative(system, &mut r, HeldInputs { control: &u, planner: &u_p, disturbance: &d }, options.step);
+            let error = system.tracking_error(&r);
+            reached.peak = reached.peak.max(error);
+            if 2 * (k + 1) > steps {
+                reached.sustained = reached.sustained.max(error);
+                for (held, group) in reached.group_sustained.iter_mut().zip(self.groups) {
+                    *held = held.max(group.iter().map(|&i| r[i] * r[i]).sum::<f64>().sqrt());
+                }
+            }
+            reached.left |= self.field.outside(&r);
+        }
+        reached
+    }
+
+    /// Every start rolled out against the worst-case planner and `options.random_planners` random ones, on
+    /// the cores: `(planner is worst-case, what it reached)` per rollout.
+    fn roll_out_starts(&self, starts: &[Vec<f64>]) -> Vec<(bool, Reached)> {
+        let random = self.options.random_planners;
+        starts
+            .par_iter()
+            .enumerate()
+            .flat_map_iter(|(i, start)| {
+                (0..=random).map(move |j| {
+                    let planner = if j == 0 { Planner::WorstCase } else { Planner::bang_bang() };
+                    let seed = self.options.seed ^ ((i * (random + 1) + j) as u64).wrapping_mul(0x9E37_79B9);
+                    let mut rng = StdRng::seed_from_u64(seed);
+                    (j == 0, self.roll_out(start, planner, &mut rng))
+                })
             })
-        })
-        .collect()
+            .collect()
+    }
 }
 
 /// The largest sustained error of the worst-case (`true`) or random planners, if any rolled out.
@@ -287,7 +282,8 @@ pub fn roll_out_solution(
         });
     }
     let (starts, v_min) = sublevel_nodes(solution, options.start_margin, options.max_starts);
-    let results = roll_out_starts(system, solution, &solution.info.params, &starts, &[], options);
+    let scene = Scene { system, field: solution, params: &solution.info.params, groups: &[], options };
+    let results = scene.roll_out_starts(&starts);
     Ok(RolloutReport {
         v_min,
         starts: starts.len(),
@@ -365,7 +361,8 @@ pub fn roll_out_axes(
         .map(|(axis, _)| axis.coords.iter().copied().filter(|i| system.error_coords.contains(i)).collect())
         .collect();
     let field = AxisSolutions { axes };
-    let results = roll_out_starts(system, &field, &params, &starts, &groups, options);
+    let scene = Scene { system, field: &field, params: &params, groups: &groups, options };
+    let results = scene.roll_out_starts(&starts);
     let axis_v_min: Vec<f64> = sets.iter().map(|(_, v)| *v).collect();
     let combined_bound = axis_v_min.iter().map(|v| v * v).sum::<f64>().sqrt();
     Ok(AxesRolloutReport {
