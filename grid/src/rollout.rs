@@ -149,25 +149,34 @@ struct AxisSolutions<'a> {
     axes: &'a [(DecomposedAxis, &'a Solution)],
 }
 
+/// Largest axis a grid holds: the stack buffers of [`AxisSolutions`] (no allocation per step).
+const MAX_AXIS: usize = crate::grid::MAX_DIMS;
+
 impl AxisSolutions<'_> {
-    fn cut(axis: &DecomposedAxis, r: &[f64]) -> Vec<f64> {
-        axis.coords.iter().map(|&i| r[i]).collect()
+    /// Calls `f` with the axis' solution and its coordinates cut out of `r`.
+    fn with_cut<T>(axis: &DecomposedAxis, r: &[f64], f: impl FnOnce(&[f64]) -> T) -> T {
+        let mut cut = [0.0; MAX_AXIS];
+        for (x, &i) in cut.iter_mut().zip(&axis.coords) {
+            *x = r[i];
+        }
+        f(&cut[..axis.coords.len()])
     }
 }
 
 impl GradientField for AxisSolutions<'_> {
     fn gradient(&self, r: &[f64], out: &mut [f64]) {
         for (axis, solution) in self.axes {
-            let mut p = vec![0.0; axis.coords.len()];
-            solution.gradient(&Self::cut(axis, r), &mut p);
-            for (&i, g) in axis.coords.iter().zip(p) {
+            let mut p = [0.0; MAX_AXIS];
+            let p = &mut p[..axis.coords.len()];
+            Self::with_cut(axis, r, |cut| solution.gradient(cut, p));
+            for (&i, &g) in axis.coords.iter().zip(p.iter()) {
                 out[i] = g;
             }
         }
     }
 
     fn outside(&self, r: &[f64]) -> bool {
-        self.axes.iter().any(|(axis, solution)| outside_grid(solution, &Self::cut(axis, r)))
+        self.axes.iter().any(|(axis, solution)| Self::with_cut(axis, r, |cut| outside_grid(solution, cut)))
     }
 }
 

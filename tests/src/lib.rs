@@ -13,6 +13,23 @@ use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
 use std::time::Duration;
 
+/// Asserts that a call failed with gRPC status `code` and a message containing every fragment.
+pub fn expect_error<T: std::fmt::Debug>(
+    result: Result<T, fastrack_client::ClientError>,
+    code: tonic::Code,
+    fragments: &[&str],
+) {
+    match result {
+        Err(fastrack_client::ClientError::Status(status)) => {
+            assert_eq!(status.code(), code, "wrong code for {:?}", status.message());
+            for fragment in fragments {
+                assert!(status.message().contains(fragment), "message {:?} lacks {fragment:?}", status.message());
+            }
+        }
+        other => panic!("expected {code:?}, got {other:?}"),
+    }
+}
+
 /// Horizon fixed in test bundles.
 pub const TEST_HORIZON: f64 = 1.0;
 

@@ -2,23 +2,10 @@
 //! is allowed; broken bundles are rejected with the reason while the other models keep serving.
 
 use fastrack_client::{model_ref, pb, ClientError, FastrackClient};
-use fastrack_e2e::{write_test_bundle, TestServer};
+use fastrack_e2e::{expect_error, write_test_bundle, TestServer};
 use fastrack_valuefn::system::dubins4d;
 use std::time::Duration;
 use tonic::Code;
-
-/// Asserts the call failed with `code` and a message containing every fragment.
-fn expect_error<T: std::fmt::Debug>(result: Result<T, ClientError>, code: Code, fragments: &[&str]) {
-    match result {
-        Err(ClientError::Status(status)) => {
-            assert_eq!(status.code(), code, "wrong code for {:?}", status.message());
-            for fragment in fragments {
-                assert!(status.message().contains(fragment), "message {:?} lacks {fragment:?}", status.message());
-            }
-        }
-        other => panic!("expected {code:?}, got {other:?}"),
-    }
-}
 
 fn good() -> pb::ModelRef {
     model_ref("good", 0)

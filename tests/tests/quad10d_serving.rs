@@ -2,26 +2,14 @@
 //! quad's ten coordinates, its three per-axis speed bounds, its thrust box that is not centred on zero and
 //! the shape of its bad input all come from the bundle's manifest and graph.
 
-use fastrack_client::{model_ref, pb, ClientError};
-use fastrack_e2e::{evaluator_for, write_test_bundle, TestServer};
+use fastrack_client::{model_ref, pb};
+use fastrack_e2e::{evaluator_for, expect_error, write_test_bundle, TestServer};
 use fastrack_valuefn::system::{dubins4d, quad10d};
 use rand::{Rng, SeedableRng};
 use tonic::Code;
 
 fn close(a: f64, b: f32) -> bool {
     (a - f64::from(b)).abs() <= 1e-6 * (1.0 + a.abs())
-}
-
-fn expect_error<T: std::fmt::Debug>(result: Result<T, ClientError>, code: Code, fragments: &[&str]) {
-    match result {
-        Err(ClientError::Status(status)) => {
-            assert_eq!(status.code(), code, "wrong code for {:?}", status.message());
-            for fragment in fragments {
-                assert!(status.message().contains(fragment), "message {:?} lacks {fragment:?}", status.message());
-            }
-        }
-        other => panic!("expected {code:?}, got {other:?}"),
-    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -5,6 +5,21 @@
 use fastrack_client::{model_ref, pb};
 use fastrack_e2e::{evaluator_for, run_binary, tiny_training_config, TestServer};
 
+/// Served values and gradients equal the exported graph's in-process answers (1e-6 relative).
+fn assert_served_like_the_graph(
+    served: &pb::EvaluateValueResponse,
+    evaluator: &fastrack_valuefn::runtime::Evaluator,
+    states: &[f64],
+    params: &[f64],
+) {
+    let s: Vec<f32> = states.iter().map(|&x| x as f32).collect();
+    let p: Vec<f32> = params.iter().map(|&x| x as f32).collect();
+    let local = evaluator.evaluate(&s, &p).unwrap();
+    for (got, want) in served.values.iter().chain(&served.gradients).zip(local.value.iter().chain(&local.grad)) {
+        assert!((got - f64::from(*want)).abs() <= 1e-6 * (1.0 + want.abs() as f64), "{got} vs {want}");
+    }
+}
+
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn an_exported_bundle_is_served() {
     let work = tempfile::tempdir().unwrap();
@@ -38,12 +53,7 @@ async fn an_exported_bundle_is_served() {
         .evaluate_value(model_ref("tiny-di", 1), states.clone(), params.clone(), pb::OutOfDomainPolicy::Reject)
         .await
         .unwrap();
-    let s: Vec<f32> = states.iter().map(|&x| x as f32).collect();
-    let p: Vec<f32> = params.iter().map(|&x| x as f32).collect();
-    let local = evaluator.evaluate(&s, &p).unwrap();
-    for (got, want) in served.values.iter().chain(&served.gradients).zip(local.value.iter().chain(&local.grad)) {
-        assert!((got - f64::from(*want)).abs() <= 1e-6 * (1.0 + want.abs() as f64), "{got} vs {want}");
-    }
+    assert_served_like_the_graph(&served, &evaluator, &states, &params);
     // queryPlannerControl with no obstacle picks the fastest row.
     let speed = client.query_planner_control(model_ref("tiny-di", 1), None).await.unwrap();
     assert_eq!(speed.beta_query, manifest.teb_table.last().unwrap().beta);
@@ -81,12 +91,7 @@ async fn runs_on_quad10d_s_axes_are_composed_into_one_served_bundle() {
         .evaluate_value(model_ref("quad", 0), states.clone(), params.clone(), pb::OutOfDomainPolicy::Reject)
         .await
         .unwrap();
-    let s: Vec<f32> = states.iter().map(|&x| x as f32).collect();
-    let p: Vec<f32> = params.iter().map(|&x| x as f32).collect();
-    let local = evaluator.evaluate(&s, &p).unwrap();
-    for (got, want) in served.values.iter().chain(&served.gradients).zip(local.value.iter().chain(&local.grad)) {
-        assert!((got - f64::from(*want)).abs() <= 1e-6 * (1.0 + want.abs() as f64), "{got} vs {want}");
-    }
+    assert_served_like_the_graph(&served, &evaluator, &states, &params);
 
     // Runs that do not cover the axes are refused with the reason.
     let failed = std::process::Command::new(fastrack_e2e::binary("fastrack-trainer"))

@@ -59,6 +59,15 @@ struct Group {
     sustained: Vec<(f64, f64)>,
 }
 
+/// A solution as the records describe it: file, system, parameters, resolution and horizon solved to.
+fn solution_figure(path: &std::path::Path, solution: &Solution) -> serde_json::Value {
+    json!({
+        "path": path, "system": solution.info.system, "params": solution.info.params,
+        "resolution": solution.grid.axes().iter().map(|a| a.n).collect::<Vec<_>>(),
+        "solved_to": solution.info.horizon,
+    })
+}
+
 fn label(solution: &Solution) -> String {
     let grid = solution.grid.axes().iter().map(|a| a.n.to_string()).collect::<Vec<_>>().join("x");
     format!("beta {:?} ({grid})", solution.info.params)
@@ -164,11 +173,11 @@ fn write_outputs(
     };
     line_chart(&png, &chart, &series).map_err(anyhow::Error::msg)?;
     let figures = json!({
-        "solutions": results.iter().map(|(path, s, r)| json!({
-            "path": path, "system": s.info.system, "params": s.info.params,
-            "resolution": s.grid.axes().iter().map(|a| a.n).collect::<Vec<_>>(),
-            "solved_to": s.info.horizon, "report": r,
-        })).collect::<Vec<_>>(),
+        "solutions": results.iter().map(|(path, s, r)| {
+            let mut figure = solution_figure(path, s);
+            figure["report"] = json!(r);
+            figure
+        }).collect::<Vec<_>>(),
         "plot": png,
     });
     let path = write_record(
@@ -272,10 +281,7 @@ fn run_axes(args: &Args, options: &RolloutOptions, id: &str) -> anyhow::Result<(
     if let Some(name) = &args.record {
         let figures = json!({
             "system": id,
-            "solutions": solutions.iter().map(|(path, s)| json!({
-                "path": path, "system": s.info.system, "params": s.info.params,
-                "resolution": s.grid.axes().iter().map(|a| a.n).collect::<Vec<_>>(), "solved_to": s.info.horizon,
-            })).collect::<Vec<_>>(),
+            "solutions": solutions.iter().map(|(path, s)| solution_figure(path, s)).collect::<Vec<_>>(),
             "reports": reports,
         });
         let path = write_record(
