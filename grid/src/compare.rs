@@ -1,9 +1,10 @@
 //! A model bundle against a grid solution at one `beta`: learned vs grid `V_min`, their ratio, the error of
-//! `V` over the grid's sublevel set, and the `(axis 0, axis 1)` slices of both value functions through the
-//! grid's minimiser.
+//! `V` over the grid's sublevel set, how the served control compares with the grid's optimal control there,
+//! and the `(axis 0, axis 1)` slices of both value functions through the grid's minimiser.
 
 use crate::solver::Solution;
 use fastrack_valuefn::runtime::{Evaluator, RuntimeError};
+use fastrack_valuefn::system::AffineSystem;
 use serde::{Deserialize, Serialize};
 
 /// Grid nodes evaluated per ONNX batch.
@@ -28,6 +29,16 @@ pub struct Comparison {
     pub mean_abs_error: f64,
     /// Max `|V_learned - V_grid|` over the set.
     pub max_abs_error: f64,
+    /// Per control, the share of the set's nodes where the served control equals the grid's optimal control
+    /// (within 0.1% of the control's range): for bang-bang controls, where the learned switching function has
+    /// the grid's sign.
+    pub control_agreement: Vec<f64>,
+    /// Mean over the set of the served control's Hamiltonian loss under the grid's gradient,
+    /// `p . G_u (u_served - u_grid) >= 0` (`p` the grid's `dV/dr`): how much faster, in `V` per second, the
+    /// served control lets the value grow than the grid's best control.
+    pub mean_control_loss: f64,
+    /// The largest such loss over the set.
+    pub max_control_loss: f64,
 }
 
 /// Slices of both value functions in the plane of grid axes 0 and 1 through the grid's minimiser
@@ -46,13 +57,24 @@ pub struct Slices {
     pub cut: Vec<f64>,
 }
 
-/// The learned values at every node of `solution`'s grid, the bundle evaluated at `params` (its own
-/// parameters: one shared `beta` for a diagonal-mode bundle, `beta` per planner input otherwise).
-pub fn learned_on_grid(evaluator: &Evaluator, solution: &Solution, params: &[f64]) -> Result<Vec<f64>, RuntimeError> {
+/// The bundle's values and served controls at the nodes of a grid.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Learned {
+    /// `V` per node.
+    pub values: Vec<f64>,
+    /// The served control per node (row-major, `n_control` per node).
+    pub controls: Vec<f64>,
+}
+
+/// The learned values and served controls at every node of `solution`'s grid, the bundle evaluated at
+/// `params` (its own parameters: one shared `beta` for a diagonal-mode bundle, `beta` per planner input
+/// otherwise).
+pub fn learned_on_grid(evaluator: &Evaluator, solution: &Solution, params: &[f64]) -> Result<Learned, RuntimeError> {
     let grid = &solution.grid;
     let n = grid.ndim();
     let params: Vec<f32> = params.iter().map(|&p| p as f32).collect();
     let mut values = Vec::with_capacity(grid.num_points());
+    let mut controls = Vec::new();
     let mut r = vec![0.0; n];
     for start in (0..grid.num_points()).step_by(BATCH) {
         let end = (start + BATCH).min(grid.num_points());
@@ -64,24 +86,42 @@ pub fn learned_on_grid(evaluator: &Evaluator, solution: &Solution, params: &[f64
         let batch_params: Vec<f32> = params.iter().copied().cycle().take((end - start) * params.len()).collect();
         let out = evaluator.evaluate(&states, &batch_params)?;
         values.extend(out.value.iter().map(|&v| f64::from(v)));
+        controls.extend(out.control.iter().map(|&u| f64::from(u)));
     }
-    Ok(values)
+    Ok(Learned { values, controls })
 }
 
-/// Compares `learned` (values at the grid's nodes) with `solution` over `{V_grid <= factor V_min}`.
-pub fn compare(solution: &Solution, learned: &[f64], sublevel_factor: f64) -> Comparison {
+/// Compares `learned` (at the grid's nodes) with `solution` of `system` over `{V_grid <= factor V_min}`.
+pub fn compare(system: &AffineSystem, solution: &Solution, learned: &Learned, sublevel_factor: f64) -> Comparison {
     let grid_v_min = solution.values.iter().copied().fold(f64::INFINITY, f64::min);
-    let learned_v_min = learned.iter().copied().fold(f64::INFINITY, f64::min);
+    let learned_v_min = learned.values.iter().copied().fold(f64::INFINITY, f64::min);
     let set_level = sublevel_factor * grid_v_min;
+    let (n_state, n_control) = (system.n_state(), system.n_control());
+    let ranges: Vec<f64> = system.controls.iter().map(|c| c.max - c.min).collect();
     let (mut sum, mut max, mut count) = (0.0, 0.0f64, 0usize);
-    for (&g, &l) in solution.values.iter().zip(learned) {
+    let (mut agree, mut loss_sum, mut loss_max) = (vec![0usize; n_control], 0.0, 0.0f64);
+    let (mut r, mut p) = (vec![0.0; n_state], vec![0.0; n_state]);
+    for (flat, (&g, &l)) in solution.values.iter().zip(&learned.values).enumerate() {
         if g <= set_level {
             let e = (l - g).abs();
             sum += e;
             max = max.max(e);
             count += 1;
+            solution.grid.point(flat, &mut r);
+            solution.gradient(&r, &mut p);
+            let best = system.optimal_control(&r, &p);
+            let served = &learned.controls[flat * n_control..(flat + 1) * n_control];
+            let mut loss = 0.0;
+            for j in 0..n_control {
+                agree[j] += usize::from((served[j] - best[j]).abs() <= 1e-3 * ranges[j]);
+                let switching: f64 = (0..n_state).map(|i| p[i] * system.g_control[(i, j)]).sum();
+                loss += switching * (served[j] - best[j]);
+            }
+            loss_sum += loss;
+            loss_max = loss_max.max(loss);
         }
     }
+    let share = |k: usize| if count > 0 { k as f64 / count as f64 } else { f64::NAN };
     Comparison {
         beta: solution.info.params.first().copied().unwrap_or(f64::NAN),
         grid_v_min,
@@ -91,6 +131,9 @@ pub fn compare(solution: &Solution, learned: &[f64], sublevel_factor: f64) -> Co
         set_nodes: count,
         mean_abs_error: if count > 0 { sum / count as f64 } else { f64::NAN },
         max_abs_error: max,
+        control_agreement: agree.into_iter().map(share).collect(),
+        mean_control_loss: if count > 0 { loss_sum / count as f64 } else { f64::NAN },
+        max_control_loss: loss_max,
     }
 }
 

@@ -1,8 +1,9 @@
 //! `compare` evaluates a diagonal-mode bundle (one shared `beta`) on a grid solved with `beta` for every
 //! planner input: the learned values on the grid equal the network's own f64 evaluation at that `beta`, and
-//! the bundle's system is the shared-parameter form of its id.
+//! the bundle's system is the shared-parameter form of its id. Its control figures are 100% agreement and no
+//! loss for the grid's own control, and the closed-form loss of the opposite vertex for a flipped one.
 
-use fastrack_grid::compare::learned_on_grid;
+use fastrack_grid::compare::{compare, learned_on_grid, Learned};
 use fastrack_grid::grid::Grid;
 use fastrack_grid::solver::{solve, SolverConfig};
 use fastrack_valuefn::network::{NetworkShape, ValueNetwork};
@@ -26,9 +27,10 @@ fn a_diagonal_bundle_is_evaluated_at_the_solutions_beta() {
     let evaluator = Evaluator::new(runtime(None).unwrap(), &onnx, dims, 1).unwrap();
 
     let learned = learned_on_grid(&evaluator, &solution, &[beta]).unwrap();
-    assert_eq!(learned.len(), grid.num_points());
+    assert_eq!(learned.values.len(), grid.num_points());
+    assert_eq!(learned.controls.len(), 2 * grid.num_points());
     let mut r = vec![0.0; 4];
-    for (flat, value) in learned.iter().enumerate() {
+    for (flat, value) in learned.values.iter().enumerate() {
         grid.point(flat, &mut r);
         let reference = network.evaluate(horizon, &r, &[beta]).value;
         assert!((value - reference).abs() < 1e-4 * reference.abs().max(1.0), "node {flat}: {value} vs {reference}");
@@ -41,4 +43,59 @@ fn a_bundle_system_is_the_system_or_its_shared_parameter_form() {
     assert_eq!(for_bundle(dubins4d::ID, 1).unwrap().params[0].name, "beta");
     assert!(for_bundle(dubins4d::ID, 3).is_none());
     assert!(for_bundle("quadcopter13d", 1).is_none());
+}
+
+#[test]
+fn the_control_figures_are_nil_for_the_grids_control_and_the_vertex_gap_for_a_flipped_one() {
+    let system = dubins4d::system();
+    let grid = Grid::for_system(&system, &[9, 9, 9, 9]).unwrap();
+    let config = SolverConfig { horizon_cap: 0.5, ..SolverConfig::default() };
+    let solution = solve(&system, &[0.8, 0.8], &grid, &config, false).unwrap();
+    let (mut r, mut p) = (vec![0.0; 4], vec![0.0; 4]);
+    let (mut best, mut flipped) = (Vec::new(), Vec::new());
+    // On the set {V <= 3 V_min}: the control mirrored within its range, lo + hi - u*, loses
+    // sum_j |s_j| (hi_j - lo_j) (s = G_u^T p), and equals u* only where u* is the midpoint (s_j = 0).
+    let v_min = solution.values.iter().copied().fold(f64::INFINITY, f64::min);
+    let (mut expected_loss, mut set_nodes, mut ties) = (0.0, 0usize, [0usize; 2]);
+    for flat in 0..grid.num_points() {
+        grid.point(flat, &mut r);
+        solution.gradient(&r, &mut p);
+        let range = system.control_range(&r);
+        let u = system.optimal_control(&r, &p);
+        let switching = [p[2], p[3]];
+        let in_set = solution.values[flat] <= 3.0 * v_min;
+        for j in 0..2 {
+            let (lo, hi) = (range.lo()[j], range.hi()[j]);
+            assert!(
+                u[j] == if switching[j] > 0.0 {
+                    lo
+                } else if switching[j] < 0.0 {
+                    hi
+                } else {
+                    0.5 * (lo + hi)
+                }
+            );
+            let mirrored = lo + hi - u[j];
+            if in_set {
+                expected_loss += switching[j].abs() * (hi - lo);
+                ties[j] += usize::from((mirrored - u[j]).abs() <= 1e-3 * (hi - lo).max(1e-12));
+            }
+            flipped.push(mirrored);
+        }
+        set_nodes += usize::from(in_set);
+        best.extend(u);
+    }
+    let values = solution.values.clone();
+    let exact = compare(&system, &solution, &Learned { values: values.clone(), controls: best }, 3.0);
+    assert_eq!(exact.set_nodes, set_nodes);
+    assert_eq!(exact.control_agreement, vec![1.0, 1.0]);
+    assert_eq!((exact.mean_control_loss, exact.max_control_loss), (0.0, 0.0));
+    let wrong = compare(&system, &solution, &Learned { values, controls: flipped }, 3.0);
+    for (j, (&agreement, &tied)) in wrong.control_agreement.iter().zip(&ties).enumerate() {
+        assert_eq!(agreement, tied as f64 / set_nodes as f64, "control {j}");
+    }
+    assert!(wrong.control_agreement.iter().all(|&a| a < 0.5), "agreement {:?}", wrong.control_agreement);
+    let mean = expected_loss / set_nodes as f64;
+    assert!((wrong.mean_control_loss - mean).abs() < 1e-9 * mean.max(1.0), "{} vs {mean}", wrong.mean_control_loss);
+    assert!(wrong.max_control_loss >= mean && mean > 0.0);
 }

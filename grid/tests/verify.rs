@@ -13,18 +13,21 @@
 //!
 //! And on a model whose control is known to be weak (fitted to a value function whose gradient makes the
 //! control `u = -a sign(x)`, an undamped oscillator a planner can pump), the search forces larger errors than
-//! random bang-bang planners from the same samples.
+//! random bang-bang planners from the same samples, and the grid solution's policy as the tracker (the
+//! reference run) holds the same samples within the grid's own values there.
 
 use fastrack_grid::grid::Grid;
 use fastrack_grid::solver::{solve, Solution, SolverConfig};
 use fastrack_grid::verify::{
-    required_samples, verify_table, Outcome, RowReport, SearchOptions, Selection, VerifyOptions,
+    required_samples, verify_rows, verify_table, Outcome, RowReport, SearchOptions, Selection, Tracker, VerifyError,
+    VerifyOptions,
 };
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::manifest::{Manifest, NetworkInfo, Provenance, SystemInfo, TebRow, MIN_TEB_ROWS, SCHEMA_VERSION};
 use fastrack_valuefn::network::{Dense, PeriodicEncoding, ValueNetwork};
 use fastrack_valuefn::onnx_writer::write_value_graph;
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
+use fastrack_valuefn::shard::Shard;
 use fastrack_valuefn::system::double_integrator::system;
 use fastrack_valuefn::system::AffineSystem;
 use indicatif::ProgressBar;
@@ -316,10 +319,14 @@ fn weak_value(x: f64, v: f64) -> f64 {
     (x * x + 0.01).sqrt() + 0.3 * x * v
 }
 
-#[test]
-fn the_search_forces_larger_errors_than_random_planners_on_a_weak_control() {
-    let system = system();
-    let grid = Grid::for_system(&system, &[81, 61]).unwrap();
+/// The grid of the weak model's fit.
+fn weak_grid(system: &AffineSystem) -> Grid {
+    Grid::for_system(system, &[81, 61]).unwrap()
+}
+
+/// A bundle of a network fitted to [`weak_value`], its table at `WEAK_LEVEL`.
+fn weak_model(system: &AffineSystem) -> (Evaluator, Bundle) {
+    let grid = weak_grid(system);
     let mut r = [0.0; 2];
     let values: Vec<f64> = (0..grid.num_points())
         .map(|flat| {
@@ -327,13 +334,86 @@ fn the_search_forces_larger_errors_than_random_planners_on_a_weak_control() {
             weak_value(r[0], r[1])
         })
         .collect();
-    let network = fit(&system, &grid, &values, 1.0);
-    let level = 0.3;
-    let (evaluator, bundle) = load(&system, &network, level);
+    let network = fit(system, &grid, &values, 1.0);
+    let (evaluator, bundle) = load(system, &network, WEAK_LEVEL);
     // The served control is the weak one where it matters.
     let probe: Vec<f32> = [0.2f32, 0.0, -0.2, 0.0].to_vec();
     let control = evaluator.evaluate(&probe, &[1.0, 1.0]).unwrap().control;
     assert!(control[0] < -0.9 && control[1] > 0.9, "control {control:?} is not -sign(x)");
+    (evaluator, bundle)
+}
+
+/// The weak model's level at `beta_u`.
+const WEAK_LEVEL: f64 = 0.3;
+
+#[test]
+fn the_grid_policy_as_the_tracker_holds_the_weak_models_samples_within_the_grid_values() {
+    let (system, solution) = ground_truth();
+    let (evaluator, bundle) = weak_model(system);
+    let beta_u = system.params[0].max;
+    let options = |tracker| VerifyOptions {
+        eps: 0.1,
+        delta: 0.01,
+        level_margin: 0.0,
+        max_rounds: 1,
+        horizon: 4.0,
+        step: 0.02,
+        random_planners: 2,
+        tracker,
+        ..VerifyOptions::default()
+    };
+    let selection =
+        Selection { betas: Some(&[beta_u]), adversaries: std::slice::from_ref(solution), grid_tolerance: 0.1 };
+    let run = |tracker| {
+        verify_rows(
+            &evaluator,
+            &bundle.manifest,
+            system,
+            &selection,
+            Shard::WHOLE,
+            &options(tracker),
+            &ProgressBar::hidden(),
+        )
+        .unwrap()
+        .remove(0)
+    };
+    let (weak, reference) = (run(Tracker::Model), run(Tracker::Grid));
+    // The independent reference: the largest grid value over the weak model's set {V <= level}, scanned on
+    // its fit's nodes. From any state the grid's policy keeps the error within about the grid's value there.
+    let grid = weak_grid(system);
+    let mut r = [0.0; 2];
+    let ceiling = (0..grid.num_points())
+        .filter_map(|flat| {
+            grid.point(flat, &mut r);
+            (weak_value(r[0], r[1]) <= WEAK_LEVEL).then(|| solution.grid.interpolate(&solution.values, &r))
+        })
+        .fold(0.0, f64::max);
+    let (weak_error, reference_error) = (weak.verification.verified_level, reference.verification.verified_level);
+    eprintln!("weak control {weak_error:.4}, grid policy {reference_error:.4}, grid values up to {ceiling:.4}");
+    assert!(reference_error <= 1.1 * ceiling, "the grid policy reached {reference_error}, its values {ceiling}");
+    assert!(weak_error > 1.3 * reference_error, "weak control {weak_error} against the grid policy {reference_error}");
+    // Without a grid solution near the row there is no policy to play.
+    let bare = Selection { betas: Some(&[beta_u]), ..Selection::default() };
+    let refused = verify_rows(
+        &evaluator,
+        &bundle.manifest,
+        system,
+        &bare,
+        Shard::WHOLE,
+        &options(Tracker::Grid),
+        &ProgressBar::hidden(),
+    );
+    assert!(
+        matches!(&refused, Err(VerifyError::Setting(m)) if m.contains("grid tracker")),
+        "{:?}",
+        refused.map(|r| r.len())
+    );
+}
+
+#[test]
+fn the_search_forces_larger_errors_than_random_planners_on_a_weak_control() {
+    let system = system();
+    let (evaluator, bundle) = weak_model(&system);
     let options = VerifyOptions {
         eps: 0.1,
         delta: 0.01,

@@ -222,6 +222,24 @@ pub struct SupervisionConfig {
     /// settles on the grid from above where it cannot match it exactly.
     #[serde(default = "default_under_weight")]
     pub under_weight: f64,
+    /// How the error of `dV/dr` is measured across the state axes (default `euclidean`).
+    #[serde(default)]
+    pub gradient_metric: GradientMetric,
+}
+
+/// How the supervision's `dV/dr` error is weighted across the state axes.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "snake_case")]
+pub enum GradientMetric {
+    /// Every axis alike: `sum_j (dV/dr_j - target_j)^2`.
+    #[default]
+    Euclidean,
+    /// Each axis by how much it moves the Hamiltonian: `sum_j w_j (dV/dr_j - target_j)^2` with
+    /// `w_j = n alpha_j^2 / sum_k alpha_k^2` at the point, `alpha_j >= |dH/dp_j|` its dissipation bound. Since
+    /// `|H(p) - H(q)| <= sum_j alpha_j |p_j - q_j|`, this is the error that changes the optimal control and the
+    /// HJI residual; an axis a strong control drives (dubins4d's heading) weighs most. The weights average 1
+    /// over the axes, so `gradient_weight` keeps its scale.
+    Hamiltonian,
 }
 
 fn default_under_weight() -> f64 {

@@ -150,7 +150,8 @@ impl Objective {
         let points =
             Batch { tau: batch.tau, state: batch.state, params: batch.params, input, n_boundary: 0, tau_limit: 0.0 };
         let v = self.value_terms(model, &points);
-        let gradient_error = (v.d_state - batch.target_gradient).powi_scalar(2).sum_dim(1).mean();
+        let gradient_error =
+            (v.d_state - batch.target_gradient).powi_scalar(2).mul(batch.gradient_weights).sum_dim(1).mean();
         (weighted_square_error(v.value - batch.target, supervision.under_weight), Some(gradient_error))
     }
 

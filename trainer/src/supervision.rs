@@ -7,7 +7,7 @@
 //! quadcopter through its exact 4-D/4-D/2-D split) anchors it. The residual still shapes the shorter
 //! horizons, which the served graph (fixed at `tau_max`) does not use.
 
-use crate::config::SupervisionConfig;
+use crate::config::{GradientMetric, SupervisionConfig};
 use burn::tensor::{Device, Tensor, TensorData};
 use fastrack_gridfile::format::{load, FormatError};
 use fastrack_gridfile::solution::Solution;
@@ -52,6 +52,8 @@ pub struct SupervisionBatch {
     pub target: Tensor<2>,
     /// The grid's `dV/dr` `[M, n_state]`: central differences of the interpolated values over one cell.
     pub target_gradient: Tensor<2>,
+    /// Weights `[M, n_state]` of each axis' squared `dV/dr` error (all 1 with the Euclidean metric).
+    pub gradient_weights: Tensor<2>,
 }
 
 /// Grid solutions and how many points each iteration draws.
@@ -69,6 +71,10 @@ pub struct GridSupervision {
     pub gradient_weight: f64,
     /// Multiplies the squared value error where the network is below the target.
     pub under_weight: f64,
+    /// How the `dV/dr` error is weighted across the axes.
+    gradient_metric: GradientMetric,
+    /// The trained system (for the Hamiltonian metric's dissipation bounds).
+    system: AffineSystem,
 }
 
 impl GridSupervision {
@@ -145,6 +151,8 @@ impl GridSupervision {
             weight: config.weight,
             gradient_weight: config.gradient_weight,
             under_weight: config.under_weight,
+            gradient_metric: config.gradient_metric,
+            system: system.clone(),
         })
     }
 
@@ -170,7 +178,8 @@ impl GridSupervision {
             Vec::with_capacity(m),
         );
         let mut target_gradient = Vec::with_capacity(m * n_state);
-        let mut x = vec![0.0; n_state];
+        let mut gradient_weights = Vec::with_capacity(m * n_state);
+        let (mut x, mut alpha) = (vec![0.0; n_state], vec![0.0; n_state]);
         for i in 0..m {
             let (a, b, w) = if self.blend_in_beta {
                 let (lo, hi) = (self.solutions[0].params[0], self.solutions[self.solutions.len() - 1].params[0]);
@@ -201,7 +210,17 @@ impl GridSupervision {
             let value = |s: &Supervised| grid.interpolate(&s.solution.values, &x);
             tau.push(a.solution.info.horizon as f32);
             state.extend(x.iter().map(|&v| v as f32));
-            params.extend(a.params.iter().zip(&b.params).map(|(&pa, &pb)| pa + (w as f32) * (pb - pa)));
+            let row_params: Vec<f32> =
+                a.params.iter().zip(&b.params).map(|(&pa, &pb)| pa + (w as f32) * (pb - pa)).collect();
+            match self.gradient_metric {
+                GradientMetric::Euclidean => gradient_weights.extend(std::iter::repeat_n(1.0f32, n_state)),
+                GradientMetric::Hamiltonian => {
+                    let p: Vec<f64> = row_params.iter().map(|&v| f64::from(v)).collect();
+                    self.system.dissipation_bounds(&x, &p, &mut alpha);
+                    gradient_weights.extend(hamiltonian_weights(&alpha).map(|w| w as f32));
+                }
+            }
+            params.extend(row_params);
             target.push(((1.0 - w) * value(a) + w * value(b)) as f32);
             for k in 0..n_state {
                 let gradient = |s: &Supervised| central_difference(&s.solution, &x, k);
@@ -215,8 +234,16 @@ impl GridSupervision {
             params: t2(params, n_params),
             target: t2(target, 1),
             target_gradient: t2(target_gradient, n_state),
+            gradient_weights: t2(gradient_weights, n_state),
         }
     }
+}
+
+/// The Hamiltonian metric's weights `n alpha_j^2 / sum_k alpha_k^2` (all 1 where every `alpha` is 0).
+fn hamiltonian_weights(alpha: &[f64]) -> impl Iterator<Item = f64> + '_ {
+    let total: f64 = alpha.iter().map(|a| a * a).sum();
+    let n = alpha.len() as f64;
+    alpha.iter().map(move |a| if total > 0.0 { n * a * a / total } else { 1.0 })
 }
 
 /// `dV/dr_k` of `solution`'s interpolant at `x`: the difference over one cell centred on `x` (one-sided where

@@ -5,7 +5,7 @@ use burn::tensor::Device;
 use fastrack_grid::format::save;
 use fastrack_grid::grid::Grid;
 use fastrack_grid::solver::{solve, Solution, SolverConfig};
-use fastrack_trainer::config::SupervisionConfig;
+use fastrack_trainer::config::{GradientMetric, SupervisionConfig};
 use fastrack_trainer::supervision::GridSupervision;
 use fastrack_valuefn::system::{double_integrator, dubins4d, AffineSystem};
 use std::path::{Path, PathBuf};
@@ -30,6 +30,7 @@ fn config(solutions: Vec<PathBuf>) -> SupervisionConfig {
         focus_share: 0.5,
         focus_factor: 2.0,
         under_weight: 1.0,
+        gradient_metric: GradientMetric::Euclidean,
     }
 }
 
@@ -146,4 +147,33 @@ fn targets_of_a_linear_field_are_its_values_and_its_slope_up_to_the_edges() {
             usize::from(x.iter().zip(&di.state).any(|(x, d)| (x - d.min).abs() < 0.33 || (d.max - x).abs() < 0.33));
     }
     assert!(at_edge > 50, "only {at_edge} rows within half a cell of an edge");
+}
+
+#[test]
+fn the_hamiltonian_metric_weighs_each_axis_by_its_squared_dissipation_bound() {
+    // dubins4d: alpha = (|v sin theta| + beta, |v cos theta| + beta, 5, 1) at beta (the shared parameter);
+    // the weights are 4 alpha_j^2 / sum alpha_k^2, so the heading, which the 5 rad/s turn rate drives,
+    // weighs most; the Euclidean metric weighs every axis 1.
+    let dir = tempfile::tempdir().unwrap();
+    let car = dubins4d::system().with_shared_parameter();
+    let (low, _) = solved(dir.path(), "low.ftgrid", &dubins4d::system(), &[0.5, 0.5], 0.05);
+    let (high, _) = solved(dir.path(), "high.ftgrid", &dubins4d::system(), &[1.25, 1.25], 0.05);
+    let rows = |t: burn::tensor::Tensor<2>| t.into_data().try_to_vec::<f32>().unwrap();
+    let mut hamiltonian = config(vec![low.clone(), high.clone()]);
+    hamiltonian.gradient_metric = GradientMetric::Hamiltonian;
+    let batch = GridSupervision::load(&hamiltonian, &car, 1.0, 3).unwrap().batch(0, &Device::flex());
+    let (state, params, weights) = (rows(batch.state), rows(batch.params), rows(batch.gradient_weights));
+    for i in 0..500 {
+        let (theta, v, beta) = (f64::from(state[4 * i + 2]), f64::from(state[4 * i + 3]), f64::from(params[i]));
+        let alpha = [(v * theta.sin()).abs() + beta, (v * theta.cos()).abs() + beta, 5.0, 1.0];
+        let total: f64 = alpha.iter().map(|a| a * a).sum();
+        for k in 0..4 {
+            let expected = 4.0 * alpha[k] * alpha[k] / total;
+            let w = f64::from(weights[4 * i + k]);
+            assert!((w - expected).abs() < 1e-5, "row {i}, axis {k}: weight {w} vs {expected}");
+        }
+        assert!(weights[4 * i + 2] > 2.0, "row {i}: the heading weighs {}", weights[4 * i + 2]);
+    }
+    let euclidean = GridSupervision::load(&config(vec![low, high]), &car, 1.0, 3).unwrap().batch(0, &Device::flex());
+    assert!(rows(euclidean.gradient_weights).iter().all(|&w| w == 1.0));
 }

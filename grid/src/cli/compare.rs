@@ -53,6 +53,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "table level",
         "mean |dV| on set",
         "max |dV| on set",
+        "control = grid's on set",
+        "control loss on set: mean / max",
         "set nodes",
         "slice",
     ]);
@@ -60,8 +62,8 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     for &beta in &args.betas {
         let solution = solve_or_load(&system, &solve, beta, &args.outputs.solutions_dir)?;
         let learned = learned_on_grid(&evaluator, &solution, &vec![beta; manifest.n_params()])?;
-        let c = compare(&solution, &learned, args.sublevel_factor);
-        let s = slices(&solution, &learned);
+        let c = compare(&system, &solution, &learned, args.sublevel_factor);
+        let s = slices(&solution, &learned.values);
         let png = args.outputs.results_dir.join(format!("{name}-beta{beta}.png"));
         let axes = solution.grid.axes();
         let title = format!(
@@ -87,6 +89,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             level.map_or("-".into(), |l| format!("{l:.4}")),
             format!("{:.4}", c.mean_abs_error),
             format!("{:.4}", c.max_abs_error),
+            system
+                .controls
+                .iter()
+                .zip(&c.control_agreement)
+                .map(|(u, a)| format!("{} {:.1}%", u.name, 100.0 * a))
+                .collect::<Vec<_>>()
+                .join(", "),
+            format!("{:.4} / {:.4}", c.mean_control_loss, c.max_control_loss),
             c.set_nodes.to_string(),
             png.file_name().map(|f| f.to_string_lossy().into_owned()).unwrap_or_default(),
         ]);

@@ -6,7 +6,7 @@ use anyhow::Context;
 use fastrack_grid::format;
 use fastrack_grid::solver::Solution;
 use fastrack_grid::verify::{
-    apply_reports, required_samples, verify_rows, Batching, Correction, RowReport, SearchOptions, Selection,
+    apply_reports, required_samples, verify_rows, Batching, Correction, RowReport, SearchOptions, Selection, Tracker,
     VerifyOptions,
 };
 use fastrack_valuefn::bundle::Bundle;
@@ -30,9 +30,14 @@ pub struct Args {
     #[arg(long)]
     bundle: PathBuf,
     /// Repository root the verified bundle is written into (`<out>/<name>/<version>/`); may be the
-    /// bundle's own repository to update it in place.
-    #[arg(long)]
-    out: PathBuf,
+    /// bundle's own repository to update it in place. Not with `--tracker grid`, which writes only a record.
+    #[arg(long, required_unless_present_any = ["part_dir", "tracker"])]
+    out: Option<PathBuf>,
+    /// Whose control the tracker plays: `model` (the bundle's served control, what is verified) or `grid`
+    /// (the policy of the row's grid solution from --grid-solutions, on the bundle's own sampled sets: a
+    /// reference for what the learned control loses; writes a record, never a bundle).
+    #[arg(long, value_enum)]
+    tracker: Option<Tracker>,
     /// Violation-probability bound epsilon.
     #[arg(long, default_value_t = 1e-3)]
     eps: f64,
@@ -183,6 +188,15 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         shard.is_whole() || args.part_dir.is_some(),
         "--shard {shard} writes a part: give --part-dir (merge the parts with `fastrack-grid verify-merge`)"
     );
+    let tracker = args.tracker.unwrap_or_default();
+    anyhow::ensure!(
+        tracker == Tracker::Model || args.out.is_none(),
+        "--tracker grid verifies no bundle: it writes only a record, so --out does not apply"
+    );
+    anyhow::ensure!(
+        tracker == Tracker::Grid || args.out.is_some() || args.part_dir.is_some(),
+        "give --out, the repository the verified bundle is written into"
+    );
     let Loaded { bundle, system, evaluator } = load(&args.bundle, args.ort_lib.as_deref())?;
     let options = VerifyOptions {
         eps: args.eps,
@@ -208,6 +222,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
         batch: args.batch,
         batching: Batching { chunk: args.chunk, parallel: !args.sequential },
+        tracker,
         seed: args.seed,
     };
     let adversaries: Vec<Solution> = args
@@ -241,7 +256,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         println!("shard {shard}: {} rows verified; part {}", part.items.len(), path.display());
         return Ok(());
     }
-    let out = Outputs { out: &args.out, record: args.record.as_deref(), results_dir: &args.results_dir };
+    let out = Outputs { out: args.out.as_deref(), record: args.record.as_deref(), results_dir: &args.results_dir };
     finish(&evaluator, bundle, &system, reports, config, &out)
 }
 
@@ -256,16 +271,21 @@ pub fn merge(args: MergeArgs) -> anyhow::Result<()> {
         verified.unwrap_or("(none)"),
         args.bundle.display()
     );
+    anyhow::ensure!(
+        merged.config["options"]["tracker"] != json!(Tracker::Grid),
+        "the parts played the grid's policy as the tracker (--tracker grid): they verify no bundle"
+    );
     let mut reports = merged.items;
     let position = |beta: f64| bundle.manifest.teb_table.iter().position(|row| row.beta == beta);
     reports.sort_by_key(|r| position(r.beta));
-    let out = Outputs { out: &args.out, record: args.record.as_deref(), results_dir: &args.results_dir };
+    let out = Outputs { out: Some(&args.out), record: args.record.as_deref(), results_dir: &args.results_dir };
     finish(&evaluator, bundle, &system, reports, merged.config, &out)
 }
 
 /// Where a verification's results go.
 struct Outputs<'a> {
-    out: &'a Path,
+    /// Where the verified bundle goes (none: a reference run, record only).
+    out: Option<&'a Path>,
     record: Option<&'a str>,
     results_dir: &'a Path,
 }
@@ -342,7 +362,9 @@ fn finish(
         &[("verification", &table)],
     )?;
     println!("wrote {}", path.display());
-    let dir = Bundle::write(outputs.out, manifest, &bundle.onnx)?;
-    println!("wrote the verified bundle {}", dir.display());
+    if let Some(out) = outputs.out {
+        let dir = Bundle::write(out, manifest, &bundle.onnx)?;
+        println!("wrote the verified bundle {}", dir.display());
+    }
     Ok(())
 }

@@ -11,7 +11,7 @@ use fastrack_valuefn::system::AffineSystem;
 use rand::rngs::StdRng;
 use rayon::prelude::*;
 
-/// Whose value gradient a planner reads.
+/// Whose value gradient a player (planner or tracker) reads.
 #[derive(Debug, Clone, Copy, PartialEq, Eq)]
 pub(super) enum Gradient {
     /// The served graph's `grad` output (the model under test).
@@ -63,6 +63,8 @@ pub(super) struct Scene<'a> {
     pub system: &'a AffineSystem,
     pub params: &'a [f64],
     pub grid: Option<&'a Solution>,
+    /// Whose control the tracker plays: the served graph's, or (as a reference) the grid solution's policy.
+    pub tracker: Gradient,
     pub horizon: f64,
     pub step: f64,
     pub mean_dwell: f64,
@@ -70,8 +72,9 @@ pub(super) struct Scene<'a> {
 }
 
 impl Scene<'_> {
-    /// Rolls every rollout forward over the horizon: the tracker plays the served `control`, the planner its
-    /// input, the disturbance the worst case of the model's gradient.
+    /// Rolls every rollout forward over the horizon: the tracker plays the served `control` (or the grid
+    /// solution's optimal control, with [`Gradient::Grid`] as the tracker), the planner its input, the
+    /// disturbance the worst case of the model's gradient.
     pub fn roll_out(&self, rollouts: &mut [Rollout]) -> Result<(), VerifyError> {
         if rollouts.is_empty() {
             return Ok(());
@@ -101,12 +104,17 @@ impl Scene<'_> {
         let mut grid_grad = vec![0.0; n_state];
         for (j, rollout) in chunk.iter_mut().enumerate() {
             let grad: Vec<f64> = out.grad[j * n_state..(j + 1) * n_state].iter().map(|&g| f64::from(g)).collect();
-            let u: Vec<f64> = out.control[j * n_control..(j + 1) * n_control].iter().map(|&c| f64::from(c)).collect();
+            if let Some(grid) =
+                self.grid.filter(|_| rollout.gradient == Gradient::Grid || self.tracker == Gradient::Grid)
+            {
+                grid.gradient(&rollout.state, &mut grid_grad);
+            }
+            let u: Vec<f64> = match (self.tracker, self.grid) {
+                (Gradient::Grid, Some(_)) => system.optimal_control(&rollout.state, &grid_grad),
+                _ => out.control[j * n_control..(j + 1) * n_control].iter().map(|&c| f64::from(c)).collect(),
+            };
             let planner_grad = match (rollout.gradient, self.grid) {
-                (Gradient::Grid, Some(grid)) => {
-                    grid.gradient(&rollout.state, &mut grid_grad);
-                    &grid_grad
-                }
+                (Gradient::Grid, Some(_)) => &grid_grad,
                 _ => &grad,
             };
             let u_p = rollout.planner.input(system, self.params, planner_grad, t, self.mean_dwell, &mut rollout.rng);

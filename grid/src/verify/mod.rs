@@ -68,6 +68,19 @@ impl Correction {
     }
 }
 
+/// Whose control the tracker plays in the rollouts.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum Tracker {
+    /// The bundle's served control: what verification certifies.
+    #[default]
+    Model,
+    /// The optimal control of the row's grid solution (central differences of its interpolant), on the
+    /// bundle's own sampled sets: a reference that separates what the learned control loses from what the
+    /// learned sets hold. Its results are not a verification of the bundle.
+    Grid,
+}
+
 /// How to verify.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct VerifyOptions {
@@ -107,6 +120,9 @@ pub struct VerifyOptions {
     /// box (measured on a pilot of proposals), so that a narrow minimum can be sampled; 0 keeps
     /// `(1 + level_margin) level`.
     pub min_acceptance: f64,
+    /// Whose control the tracker plays.
+    #[serde(default)]
+    pub tracker: Tracker,
     /// Random seed.
     pub seed: u64,
 }
@@ -130,6 +146,7 @@ impl Default for VerifyOptions {
             proposal_box: 2.5,
             max_proposals: 20_000_000,
             min_acceptance: 5e-3,
+            tracker: Tracker::Model,
             seed: 11,
         }
     }
@@ -445,6 +462,12 @@ pub fn verify_row(
             return Err(VerifyError::System { bundle: g.info.system.clone(), system: system.id.into() });
         }
     }
+    if options.tracker == Tracker::Grid && grid.is_none() {
+        return Err(VerifyError::Setting(format!(
+            "row beta {}: the grid tracker plays a grid solution's policy, and none lies within the grid tolerance of this beta",
+            row.beta
+        )));
+    }
     let started = Instant::now();
     let mut rng = StdRng::seed_from_u64(options.seed ^ row.beta.to_bits());
     let params = vec![row.beta; system.n_params()];
@@ -454,6 +477,10 @@ pub fn verify_row(
         system,
         params: &params,
         grid,
+        tracker: match options.tracker {
+            Tracker::Model => Gradient::Model,
+            Tracker::Grid => Gradient::Grid,
+        },
         horizon: options.horizon,
         step: options.step,
         mean_dwell: options.mean_dwell,
@@ -676,6 +703,7 @@ pub fn rollout_rate(
         system,
         params: &params,
         grid: None,
+        tracker: Gradient::Model,
         horizon: probe.steps as f64 * probe.step,
         step: probe.step,
         mean_dwell: 1.0,
