@@ -48,6 +48,24 @@ async fn compare_and_verify_read_a_diagonal_bundle() {
     let manifest = Bundle::load(&verified.join("tiny-d4").join("1")).unwrap().manifest;
     assert!(manifest.teb_table.iter().all(|row| row.verification.is_some()), "every row is verified");
 
+    // Only the lowest row of the unverified bundle: its verified level rises above the unverified rows over
+    // it, so no bundle can be written, but the rollouts are not lost: the record is.
+    let partial = work.path().join("partial");
+    let lowest = verify
+        .replace("--record tiny-verify", "--record tiny-lowest --betas 0.5")
+        .replace(path(&verified), path(&partial));
+    let refused = std::process::Command::new(fastrack_e2e::binary("fastrack-grid"))
+        .args(lowest.split_whitespace())
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success(), "{said}");
+    assert!(said.contains("the record is written") && said.contains("verify it as well"), "{said}");
+    let record = std::fs::read_to_string(results.join("tiny-lowest.md")).unwrap();
+    let row = record.lines().find(|l| l.starts_with("| 0.5000 |")).expect("the row's result in the record");
+    assert_eq!(row.split('|').nth(6).map(str::trim), Some("-"), "no served level without a table: {row}");
+    assert!(!partial.exists(), "no bundle written");
+
     // GetModel serves every figure of each row's verification, as the manifest holds it.
     let (_server, client) = TestServer::start_serving(&verified).await;
     let info = client.get_model(model_ref("tiny-d4", 1)).await.unwrap();

@@ -290,7 +290,9 @@ struct Outputs<'a> {
     results_dir: &'a Path,
 }
 
-/// Writes `reports` into the bundle's table, prints and records them, and writes the verified bundle.
+/// Writes `reports` into the bundle's table, prints and records them, and writes the verified bundle. A table
+/// the reports cannot be written into (a subset of rows that breaks the monotone levels) still gets its record,
+/// without served levels, before the error.
 fn finish(
     evaluator: &Evaluator,
     bundle: Bundle,
@@ -300,7 +302,7 @@ fn finish(
     outputs: &Outputs<'_>,
 ) -> anyhow::Result<()> {
     let mut manifest: Manifest = bundle.manifest.clone();
-    apply_reports(evaluator, &mut manifest, system, &reports)?;
+    let applied = apply_reports(evaluator, &mut manifest, system, &reports);
     let mut table = Table::new(&[
         "beta",
         "learned level",
@@ -318,8 +320,11 @@ fn finish(
     ]);
     for r in &reports {
         let v = &r.verification;
-        let served =
-            manifest.teb_table.iter().find(|row| row.beta == r.beta).map_or(f64::NAN, |row| row.served_level());
+        let served = applied
+            .as_ref()
+            .ok()
+            .and_then(|()| manifest.teb_table.iter().find(|row| row.beta == r.beta))
+            .map_or_else(|| "-".to_string(), |row| format!("{:.4}", row.served_level()));
         let levels: Vec<String> = r.rounds.iter().map(|round| format!("{:.4}", round.level)).collect();
         println!(
             "beta {:.4}: level {:.4}, rounds at {} -> verified {:.4} ({} of {} samples broke the last), {:.0} s",
@@ -338,7 +343,7 @@ fn finish(
             format!("{}", r.rounds.len()),
             format!("{:.4}", r.sampled_level()),
             format!("{:.4}", v.verified_level),
-            format!("{served:.4}"),
+            served,
             format!("{} / {}", v.violations, v.samples),
             v.hardest_planner().map_or_else(String::new, |p| p.family.clone()),
             per_planner.join("; "),
@@ -362,6 +367,7 @@ fn finish(
         &[("verification", &table)],
     )?;
     println!("wrote {}", path.display());
+    applied.context("the record is written; the reports do not fit the bundle's table, so no bundle is")?;
     if let Some(out) = outputs.out {
         let dir = Bundle::write(out, manifest, &bundle.onnx)?;
         println!("wrote the verified bundle {}", dir.display());
