@@ -324,3 +324,41 @@ fn relative_state_subtracts_planner_and_wraps_angles() {
     assert!(space.in_domain(&r));
     assert!(!space.in_domain(&[3.5, 0.0, 0.0, 1.0]));
 }
+
+#[test]
+fn the_x_axis_in_tilt_rate_coordinates_is_the_x_axis_under_a_shear() {
+    use quad10d::{from_tilt_rate, to_tilt_rate, D1, TILT_ANGULAR_RATE_HALF_WIDTH, TILT_MAX};
+    let (x, rate) = (quad10d::x_axis(), quad10d::x_axis_tilt_rate());
+    assert_eq!((rate.n_state(), rate.error_coords.clone(), rate.params[0].name), (4, vec![0], "beta_1"));
+    let mut rng = rand::rngs::StdRng::seed_from_u64(23);
+    for _ in 0..1000 {
+        let r = random_state(&x, &mut rng);
+        let z = to_tilt_rate(&r);
+        assert!(from_tilt_rate(&z).iter().zip(&r).all(|(a, b)| (a - b).abs() < 1e-12));
+        // z = T r with T linear, so z' = T r' for every input.
+        let (u, up) = ([rng.random_range(-TILT_MAX..TILT_MAX)], [rng.random_range(-1.5..1.5)]);
+        let (mut r_dot, mut z_dot) = (vec![0.0; 4], vec![0.0; 4]);
+        x.dynamics(&r, &u, &up, &[], &mut r_dot);
+        rate.dynamics(&z, &u, &up, &[], &mut z_dot);
+        let mapped = to_tilt_rate(&r_dot);
+        assert!(mapped.iter().zip(&z_dot).all(|(a, b)| (a - b).abs() < 1e-9), "{mapped:?} vs {z_dot:?}");
+        // V_r(r) = V_z(T r), so dV/dr = T^T dV/dz and H_r(r, T^T p) = H_z(T r, p): one game.
+        let p: Vec<f64> = (0..4).map(|_| rng.random_range(-3.0..3.0)).collect();
+        let pulled = [p[0], p[1], p[2] - D1 * p[3], p[3]];
+        let beta = [rng.random_range(0.5..1.5)];
+        let (h_r, h_z) = (x.hamiltonian(&r, &pulled, &beta), rate.hamiltonian(&z, &p, &beta));
+        assert!((h_r - h_z).abs() < 1e-9, "H {h_r} vs {h_z}");
+        assert_eq!(x.optimal_control(&r, &pulled), rate.optimal_control(&z, &p));
+    }
+    // The tilt rate's domain holds what the tilt reaches from rest: its impulse response's rate integrates to
+    // 2 h_max, and TILT_MAX times that is the largest |omega| any command can force.
+    let (dt, mut theta, mut omega, mut integral) = (1e-5, 0.0f64, quad10d::N0, 0.0);
+    for _ in 0..(10.0 / dt) as usize {
+        integral += omega.abs() * dt;
+        let accel = -quad10d::D0 * theta - D1 * omega;
+        theta += omega * dt;
+        omega += accel * dt;
+    }
+    let largest = TILT_MAX * integral;
+    assert!((largest - 0.69).abs() < 0.005 && largest < TILT_ANGULAR_RATE_HALF_WIDTH, "largest tilt rate {largest}");
+}

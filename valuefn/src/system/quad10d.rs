@@ -27,6 +27,8 @@ pub const ID: &str = "quad10d";
 pub const X_AXIS_ID: &str = "quad10d_x";
 /// Id of the z subsystem `(r9, r10; beta_3)`.
 pub const Z_AXIS_ID: &str = "quad10d_z";
+/// Id of the x subsystem in tilt-rate coordinates ([`x_axis_tilt_rate`]).
+pub const X_AXIS_TILT_RATE_ID: &str = "quad10d_x_tilt_rate";
 
 /// Gravity (m/s^2).
 pub const GRAVITY: f64 = 9.81;
@@ -55,6 +57,10 @@ pub const VELOCITY_HALF_WIDTH: f64 = 4.0;
 pub const TILT_HALF_WIDTH: f64 = 0.5;
 /// Half-width of the tilt-rate state's domain: above `8 TILT_MAX` (2.79), which bounds it from rest.
 pub const TILT_RATE_HALF_WIDTH: f64 = 4.5;
+/// Half-width of the tilt rate's domain in [`x_axis_tilt_rate`] (rad/s): above `2 h_max TILT_MAX` = 0.69, the
+/// largest tilt rate from rest (`h_max` = 0.99 s^-1 the peak of the tilt's impulse response, whose rate
+/// changes sign once, so its integral of `|h'|` is `2 h_max`).
+pub const TILT_ANGULAR_RATE_HALF_WIDTH: f64 = 1.0;
 /// Half-width of the vertical position-error domain (m): 2.4 times the z axis' bound at `beta_u` (0.63 m).
 pub const VERTICAL_POSITION_HALF_WIDTH: f64 = 1.5;
 /// Half-width of the vertical velocity domain (m/s).
@@ -139,6 +145,48 @@ pub fn x_axis() -> AffineSystem {
     system()
         .subsystem(X_AXIS_ID, "quad10d's x axis (position error, velocity, tilt, tilt rate) tracking a 1-D point planner with speed bound beta_1", &[0, 1, 2, 3])
         .expect("quad10d's x axis decouples")
+}
+
+/// The x subsystem in the coordinates `(x_r, v_x, theta_x, omega_x)`, with `omega_x = theta_x' = r4 - d1 r3` the
+/// tilt's rate ([`to_tilt_rate`]): `omega_x' = -d0 theta_x - d1 omega_x + n0 u_x`, the rest unchanged. The same
+/// system under a shear that keeps the error coordinate, so its value function is `quad10d_x`'s at
+/// `to_tilt_rate(r)` and its `V_min` the same. From rest the tilt pair stays in a thin band along
+/// `r4 = d1 r3` (`|omega_x| <= 0.69`), which a box in `(r3, r4)` covers with mostly unreachable nodes and a box
+/// in `(theta_x, omega_x)` does not: the grid solver's coordinates for the x axis' ground truth.
+pub fn x_axis_tilt_rate() -> AffineSystem {
+    let mut system = x_axis();
+    system.id = X_AXIS_TILT_RATE_ID;
+    system.description =
+        "quad10d's x axis in tilt-rate coordinates (position error, velocity, tilt, the tilt's rate) tracking a 1-D point planner with speed bound beta_1";
+    system.state[3] = StateDim {
+        name: "omega_x",
+        unit: "rad/s",
+        min: -TILT_ANGULAR_RATE_HALF_WIDTH,
+        max: TILT_ANGULAR_RATE_HALF_WIDTH,
+        periodic: false,
+        limits: None,
+    };
+    system.drift = Drift {
+        n_state: 4,
+        terms: vec![
+            term(0, 1.0, &[Factor::Linear(1)]),
+            term(1, GRAVITY, &[Factor::Tan(2)]),
+            term(2, 1.0, &[Factor::Linear(3)]),
+            term(3, -D0, &[Factor::Linear(2)]),
+            term(3, -D1, &[Factor::Linear(3)]),
+        ],
+    };
+    system
+}
+
+/// `quad10d_x` coordinates `(r1, r2, r3, r4)` to [`x_axis_tilt_rate`]'s, `(r1, r2, r3, r4 - d1 r3)`.
+pub fn to_tilt_rate(r: &[f64]) -> [f64; 4] {
+    [r[0], r[1], r[2], r[3] - D1 * r[2]]
+}
+
+/// [`x_axis_tilt_rate`] coordinates back to `quad10d_x`'s: `r4 = omega_x + d1 theta_x`.
+pub fn from_tilt_rate(z: &[f64]) -> [f64; 4] {
+    [z[0], z[1], z[2], z[3] + D1 * z[2]]
 }
 
 /// The exact decomposition: the x axis on `r1..r4` with `beta_1`, the same subsystem on `r5..r8` with
