@@ -61,7 +61,7 @@ fn axis_policies_side_by_side_hold_each_axis_in_its_own_bound_in_the_full_system
     // z: fine enough to sit within 1% of its closed form. x: coarse (11^4 nodes over a 3 m error domain, a
     // short horizon), so its V_min is loose; what is checked is that its policy holds it in the full system.
     let z = solve(&z_axis(), &[beta], &grid(beta, 201, 101), &config, false).unwrap();
-    let x_grid = symmetric_grid(&[("x_r", 3.0, 11), ("v_x", 3.0, 11), ("theta_x", 0.4, 11), ("w_x", 3.5, 11)]);
+    let x_grid = symmetric_grid(&[("x_r", 3.0, 11), ("v_x", 3.0, 11), ("theta_x", 0.4, 11), ("omega_x", 1.0, 11)]);
     let x_config = SolverConfig { horizon_cap: 12.0, ..config };
     let x = solve(&x_axis(), &[beta], &x_grid, &x_config, false).unwrap();
     let full = quad10d::system();

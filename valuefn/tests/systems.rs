@@ -170,8 +170,8 @@ fn quad10d_hamiltonian_and_controls_equal_brute_force_and_closed_form() {
         let brute = brute_force_hamiltonian(&system, &r, &p, &params);
         assert!((h - brute).abs() < 1e-9, "H {h} vs brute force {brute}");
         let axis = |k: usize, beta: f64| {
-            p[k] * r[k + 1] + p[k + 1] * G * r[k + 2].tan() + p[k + 2] * (-D1 * r[k + 2] + r[k + 3])
-                - p[k + 3] * D0 * r[k + 2]
+            p[k] * r[k + 1] + p[k + 1] * G * r[k + 2].tan() + p[k + 2] * r[k + 3]
+                - p[k + 3] * (D0 * r[k + 2] + D1 * r[k + 3])
                 + beta * p[k].abs()
                 - N0 * TILT_MAX * p[k + 3].abs()
         };
@@ -292,14 +292,14 @@ fn a_subsystem_must_decouple() {
     let no_error = dubins.subsystem("d", "d", &[2, 3]).unwrap_err();
     assert!(no_error.contains("no error coordinate"), "{no_error}");
     let quad = quad10d::system();
-    // r3 alone: its drift depends on r4.
-    assert!(quad.subsystem("q", "q", &[0, 1, 2]).unwrap_err().contains("w_x"));
+    // The tilt alone: its drift is the tilt's rate.
+    assert!(quad.subsystem("q", "q", &[0, 1, 2]).unwrap_err().contains("omega_x"));
     assert!(quad.subsystem("q", "q", &[0, 11]).unwrap_err().contains("does not exist"));
     // An input acting on two axes couples them.
     let mut shared = quad10d::system();
     shared.g_control[(7, 0)] = 1.0;
     let err = shared.subsystem("q", "q", &[0, 1, 2, 3]).unwrap_err();
-    assert!(err.contains("control u_x also acts on w_y"), "{err}");
+    assert!(err.contains("control u_x also acts on omega_y"), "{err}");
 }
 
 #[test]
@@ -325,30 +325,46 @@ fn relative_state_subtracts_planner_and_wraps_angles() {
     assert!(!space.in_domain(&[3.5, 0.0, 0.0, 1.0]));
 }
 
+/// The paper's form of one horizontal axis, `r = (r1, r2, r3, r4)` with `r4` the tilt filter's internal
+/// state: `r1' = r2 - u_p`, `r2' = g tan r3`, `r3' = -d1 r3 + r4`, `r4' = -d0 r3 + n0 u`.
+fn paper_horizontal_axis(r: &[f64], u: f64, up: f64) -> [f64; 4] {
+    use quad10d::{D0, D1, GRAVITY, N0};
+    [r[1] - up, GRAVITY * r[2].tan(), -D1 * r[2] + r[3], -D0 * r[2] + N0 * u]
+}
+
 #[test]
-fn the_x_axis_in_tilt_rate_coordinates_is_the_x_axis_under_a_shear() {
-    use quad10d::{from_tilt_rate, to_tilt_rate, D1, TILT_ANGULAR_RATE_HALF_WIDTH, TILT_MAX};
-    let (x, rate) = (quad10d::x_axis(), quad10d::x_axis_tilt_rate());
-    assert_eq!((rate.n_state(), rate.error_coords.clone(), rate.params[0].name), (4, vec![0], "beta_1"));
+fn quad10d_s_horizontal_axis_is_the_paper_s_under_the_tilt_rate_shear() {
+    use quad10d::{D1, TILT_MAX, TILT_RATE_HALF_WIDTH};
+    let x = quad10d::x_axis();
+    assert_eq!((x.state[3].name, x.state[3].max), ("omega_x", TILT_RATE_HALF_WIDTH));
+    // z = T r: (x_r, v_x, theta_x, omega_x) = (r1, r2, r3, r4 - d1 r3).
+    let to_ours = |r: &[f64]| [r[0], r[1], r[2], r[3] - D1 * r[2]];
     let mut rng = rand::rngs::StdRng::seed_from_u64(23);
     for _ in 0..1000 {
-        let r = random_state(&x, &mut rng);
-        let z = to_tilt_rate(&r);
-        assert!(from_tilt_rate(&z).iter().zip(&r).all(|(a, b)| (a - b).abs() < 1e-12));
-        // z = T r with T linear, so z' = T r' for every input.
-        let (u, up) = ([rng.random_range(-TILT_MAX..TILT_MAX)], [rng.random_range(-1.5..1.5)]);
-        let (mut r_dot, mut z_dot) = (vec![0.0; 4], vec![0.0; 4]);
-        x.dynamics(&r, &u, &up, &[], &mut r_dot);
-        rate.dynamics(&z, &u, &up, &[], &mut z_dot);
-        let mapped = to_tilt_rate(&r_dot);
+        let r: Vec<f64> = [5.0, 4.0, 0.5, 4.5].iter().map(|&h: &f64| rng.random_range(-h..h)).collect();
+        let z = to_ours(&r);
+        // T is linear, so z' = T r' for every input: one system.
+        let (u, up) = (rng.random_range(-TILT_MAX..TILT_MAX), rng.random_range(-1.5..1.5));
+        let mut z_dot = vec![0.0; 4];
+        x.dynamics(&z, &[u], &[up], &[], &mut z_dot);
+        let mapped = to_ours(&paper_horizontal_axis(&r, u, up));
         assert!(mapped.iter().zip(&z_dot).all(|(a, b)| (a - b).abs() < 1e-9), "{mapped:?} vs {z_dot:?}");
-        // V_r(r) = V_z(T r), so dV/dr = T^T dV/dz and H_r(r, T^T p) = H_z(T r, p): one game.
+        // V_paper(r) = V(T r), so dV_paper/dr = T^T dV/dz and the paper's Hamiltonian at (r, T^T p) is ours
+        // at (T r, p): the same game, the same bound. The paper's H by brute force over u and u_p.
         let p: Vec<f64> = (0..4).map(|_| rng.random_range(-3.0..3.0)).collect();
         let pulled = [p[0], p[1], p[2] - D1 * p[3], p[3]];
-        let beta = [rng.random_range(0.5..1.5)];
-        let (h_r, h_z) = (x.hamiltonian(&r, &pulled, &beta), rate.hamiltonian(&z, &p, &beta));
-        assert!((h_r - h_z).abs() < 1e-9, "H {h_r} vs {h_z}");
-        assert_eq!(x.optimal_control(&r, &pulled), rate.optimal_control(&z, &p));
+        let beta = rng.random_range(0.5..1.5);
+        let paper_h = [-TILT_MAX, TILT_MAX]
+            .iter()
+            .map(|&u| {
+                [-beta, beta]
+                    .iter()
+                    .map(|&up| paper_horizontal_axis(&r, u, up).iter().zip(&pulled).map(|(a, b)| a * b).sum::<f64>())
+                    .fold(f64::NEG_INFINITY, f64::max)
+            })
+            .fold(f64::INFINITY, f64::min);
+        let h = x.hamiltonian(&z, &p, &[beta]);
+        assert!((h - paper_h).abs() < 1e-9, "H {h} vs the paper's {paper_h}");
     }
     // The tilt rate's domain holds what the tilt reaches from rest: its impulse response's rate integrates to
     // 2 h_max, and TILT_MAX times that is the largest |omega| any command can force.
@@ -360,5 +376,5 @@ fn the_x_axis_in_tilt_rate_coordinates_is_the_x_axis_under_a_shear() {
         omega += accel * dt;
     }
     let largest = TILT_MAX * integral;
-    assert!((largest - 0.69).abs() < 0.005 && largest < TILT_ANGULAR_RATE_HALF_WIDTH, "largest tilt rate {largest}");
+    assert!((largest - 0.69).abs() < 0.005 && largest < TILT_RATE_HALF_WIDTH, "largest tilt rate {largest}");
 }

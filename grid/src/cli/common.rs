@@ -27,8 +27,7 @@ pub struct StudyOutputs {
 /// The grid and solver options of a solve.
 #[derive(clap::Args, Clone, Debug)]
 pub struct SolveOptions {
-    /// System id (dubins4d, double_integrator, quad10d, and quad10d's axes quad10d_x, quad10d_z, and
-    /// quad10d_x_tilt_rate, the x axis in the tilt's rate).
+    /// System id (dubins4d, double_integrator, quad10d, and quad10d's axes quad10d_x, quad10d_z).
     #[arg(long, default_value = "dubins4d")]
     pub system: String,
     /// Nodes per axis: one number for every axis, or one per axis, comma separated.

@@ -407,7 +407,6 @@ pub fn by_id(id: &str) -> Option<AffineSystem> {
         quad10d::ID => Some(quad10d::system()),
         quad10d::X_AXIS_ID => Some(quad10d::x_axis()),
         quad10d::Z_AXIS_ID => Some(quad10d::z_axis()),
-        quad10d::X_AXIS_TILT_RATE_ID => Some(quad10d::x_axis_tilt_rate()),
         _ => None,
     }
 }
@@ -427,11 +426,5 @@ pub fn for_bundle(id: &str, n_params: usize) -> Option<AffineSystem> {
 }
 
 /// Ids accepted by [`by_id`].
-pub const SYSTEM_IDS: &[&str] = &[
-    dubins4d::ID,
-    double_integrator::ID,
-    quad10d::ID,
-    quad10d::X_AXIS_ID,
-    quad10d::Z_AXIS_ID,
-    quad10d::X_AXIS_TILT_RATE_ID,
-];
+pub const SYSTEM_IDS: &[&str] =
+    &[dubins4d::ID, double_integrator::ID, quad10d::ID, quad10d::X_AXIS_ID, quad10d::Z_AXIS_ID];

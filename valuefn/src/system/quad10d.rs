@@ -1,20 +1,29 @@
 //! The paper's second example: a near-hover quadcopter (10 relative states) tracking a 3-D point planner
 //! with one speed bound per axis (3 parameters, 13 inputs to the value function).
 //!
-//! Per horizontal axis (x shown; y is the same on `r5..r8` with `u_py`, `u_y`): `r1' = r2 - u_px`,
-//! `r2' = g tan(r3)`, `r3' = -d1 r3 + r4`, `r4' = -d0 r3 + n0 u_x`, with `r1` the position error, `r2` the
-//! tracker's velocity, `r3` its tilt and `r4` the tilt's internal rate state. Vertically: `r9' = r10 - u_pz`,
-//! `r10' = k_T u_z - g`. `|u_x|, |u_y| <= pi/9`, `u_z in [0, 1.5 g]` (thrust: a box not centred on zero),
-//! `|u_pi| <= beta_i`, `beta_i in [0.5, 1.5]`.
+//! The paper writes each horizontal axis (x shown; y is the same with `u_py`, `u_y`) as `r1' = r2 - u_px`,
+//! `r2' = g tan(r3)`, `r3' = -d1 r3 + r4`, `r4' = -d0 r3 + n0 u_x`, with `r4` an internal state of the tilt's
+//! filter. The system here is the same one in the coordinates a robot measures: position error `x_r = r1`,
+//! velocity `v_x = r2`, tilt `theta_x = r3` and the tilt's rate `omega_x = theta_x' = r4 - d1 r3` (a gyro's
+//! reading), so that `theta_x' = omega_x` and `omega_x' = -d0 theta_x - d1 omega_x + n0 u_x`. The map is an
+//! exact shear that keeps the error coordinate: the value function is the paper's at `r4 = omega_x + d1
+//! theta_x` and every bound the same. Vertically: `z_r' = v_z - u_pz`, `v_z' = k_T u_z - g`.
+//! `|u_x|, |u_y| <= pi/9`, `u_z in [0, 1.5 g]` (thrust: a box not centred on zero), `|u_pi| <= beta_i`,
+//! `beta_i in [0.5, 1.5]`.
 //!
-//! The system splits exactly into the x subsystem `(r1..r4; beta_1)`, the identical y subsystem
-//! `(r5..r8; beta_2)` and the z subsystem `(r9, r10; beta_3)`: no drift term, input or parameter couples two
-//! of them ([`AffineSystem::subsystem`] checks this). [`x_axis`] and [`z_axis`] are those subsystems, which
-//! the grid solver can solve as ground truth.
+//! Why these coordinates: from rest the paper's pair `(r3, r4)` stays in a thin band along `r4 = d1 r3`, so a
+//! box in it (the domain a network is trained on, the grid a solver covers) holds mostly states no tracker
+//! reaches; in `(theta_x, omega_x)` the reachable states fill the box.
+//!
+//! The system splits exactly into the x subsystem (coordinates 0..4; `beta_1`), the identical y subsystem
+//! (4..8; `beta_2`) and the z subsystem (8, 9; `beta_3`): no drift term, input or parameter couples two of
+//! them ([`AffineSystem::subsystem`] checks this). [`x_axis`] and [`z_axis`] are those subsystems, which the
+//! grid solver can solve as ground truth.
 //!
 //! No coordinate has tracker limits: the tilt pair is an overdamped filter of the bounded tilt command
-//! (poles `-4 +- sqrt(6)`, positive impulse responses), so from rest `|r3| <= pi/9` and `|r4| <= 8 pi/9`
-//! under any command, and the velocities are moved by the drift, which state limits cannot hold.
+//! (poles `-4 +- sqrt(6)`, positive impulse responses), so from rest `|theta_x| <= pi/9` and
+//! `|omega_x| <= 0.69` under any command, and the velocities are moved by the drift, which state limits
+//! cannot hold.
 
 use super::drift::{term, Factor};
 use super::{AffineSystem, DecomposedAxis, Drift, InputDim, ParamDim, StateDim};
@@ -23,12 +32,10 @@ use std::f64::consts::PI;
 
 /// System id.
 pub const ID: &str = "quad10d";
-/// Id of the x (and y) subsystem `(r1..r4; beta_1)`.
+/// Id of the x (and y) subsystem `(x_r, v_x, theta_x, omega_x; beta_1)`.
 pub const X_AXIS_ID: &str = "quad10d_x";
-/// Id of the z subsystem `(r9, r10; beta_3)`.
+/// Id of the z subsystem `(z_r, v_z; beta_3)`.
 pub const Z_AXIS_ID: &str = "quad10d_z";
-/// Id of the x subsystem in tilt-rate coordinates ([`x_axis_tilt_rate`]).
-pub const X_AXIS_TILT_RATE_ID: &str = "quad10d_x_tilt_rate";
 
 /// Gravity (m/s^2).
 pub const GRAVITY: f64 = 9.81;
@@ -55,12 +62,10 @@ pub const VELOCITY_HALF_WIDTH: f64 = 4.0;
 /// Half-width of the tilt domain (rad): above [`TILT_MAX`], which bounds the tilt from rest, with room for
 /// the states of the error set that are not reached from rest.
 pub const TILT_HALF_WIDTH: f64 = 0.5;
-/// Half-width of the tilt-rate state's domain: above `8 TILT_MAX` (2.79), which bounds it from rest.
-pub const TILT_RATE_HALF_WIDTH: f64 = 4.5;
-/// Half-width of the tilt rate's domain in [`x_axis_tilt_rate`] (rad/s): above `2 h_max TILT_MAX` = 0.69, the
-/// largest tilt rate from rest (`h_max` = 0.99 s^-1 the peak of the tilt's impulse response, whose rate
-/// changes sign once, so its integral of `|h'|` is `2 h_max`).
-pub const TILT_ANGULAR_RATE_HALF_WIDTH: f64 = 1.0;
+/// Half-width of the tilt rate's domain (rad/s): above `2 h_max TILT_MAX` = 0.69, the largest tilt rate from
+/// rest (`h_max` = 0.99 s^-1 the peak of the tilt's impulse response, whose rate changes sign once, so its
+/// integral of `|h'|` is `2 h_max`).
+pub const TILT_RATE_HALF_WIDTH: f64 = 1.0;
 /// Half-width of the vertical position-error domain (m): 2.4 times the z axis' bound at `beta_u` (0.63 m).
 pub const VERTICAL_POSITION_HALF_WIDTH: f64 = 1.5;
 /// Half-width of the vertical velocity domain (m/s).
@@ -73,8 +78,8 @@ fn symmetric(name: &'static str, unit: &'static str, half_width: f64) -> StateDi
 /// The four coordinates of one horizontal axis, named for `axis` (`x` or `y`).
 fn horizontal_axis(axis: char) -> [StateDim; 4] {
     let (position, velocity, tilt, rate) = match axis {
-        'x' => ("x_r", "v_x", "theta_x", "w_x"),
-        _ => ("y_r", "v_y", "theta_y", "w_y"),
+        'x' => ("x_r", "v_x", "theta_x", "omega_x"),
+        _ => ("y_r", "v_y", "theta_y", "omega_y"),
     };
     [
         symmetric(position, "m", POSITION_HALF_WIDTH),
@@ -90,9 +95,9 @@ fn horizontal_drift(first: usize) -> Vec<super::DriftTerm> {
     vec![
         term(position, 1.0, &[Factor::Linear(velocity)]),
         term(velocity, GRAVITY, &[Factor::Tan(tilt)]),
-        term(tilt, -D1, &[Factor::Linear(tilt)]),
         term(tilt, 1.0, &[Factor::Linear(rate)]),
         term(rate, -D0, &[Factor::Linear(tilt)]),
+        term(rate, -D1, &[Factor::Linear(rate)]),
     ]
 }
 
@@ -121,7 +126,7 @@ pub fn system() -> AffineSystem {
     let beta = |name| ParamDim { name, unit: "m/s", min: beta_l, max: beta_u };
     AffineSystem {
         id: ID,
-        description: "near-hover quadcopter (per axis: position error, velocity, tilt, tilt rate; vertically: position error, velocity) tracking a 3-D point planner with per-axis speed bounds beta_1..3",
+        description: "near-hover quadcopter (per axis: position error, velocity, tilt, the tilt's rate; vertically: position error, velocity) tracking a 3-D point planner with per-axis speed bounds beta_1..3",
         state,
         error_coords: vec![0, 4, 8],
         params: vec![beta("beta_1"), beta("beta_2"), beta("beta_3")],
@@ -140,57 +145,15 @@ pub fn system() -> AffineSystem {
     }
 }
 
-/// The x subsystem `(r1..r4; beta_1)`, which is also the y subsystem `(r5..r8; beta_2)` renamed.
+/// The x subsystem `(x_r, v_x, theta_x, omega_x; beta_1)`, which is also the y subsystem renamed.
 pub fn x_axis() -> AffineSystem {
     system()
-        .subsystem(X_AXIS_ID, "quad10d's x axis (position error, velocity, tilt, tilt rate) tracking a 1-D point planner with speed bound beta_1", &[0, 1, 2, 3])
+        .subsystem(X_AXIS_ID, "quad10d's x axis (position error, velocity, tilt, the tilt's rate) tracking a 1-D point planner with speed bound beta_1", &[0, 1, 2, 3])
         .expect("quad10d's x axis decouples")
 }
 
-/// The x subsystem in the coordinates `(x_r, v_x, theta_x, omega_x)`, with `omega_x = theta_x' = r4 - d1 r3` the
-/// tilt's rate ([`to_tilt_rate`]): `omega_x' = -d0 theta_x - d1 omega_x + n0 u_x`, the rest unchanged. The same
-/// system under a shear that keeps the error coordinate, so its value function is `quad10d_x`'s at
-/// `to_tilt_rate(r)` and its `V_min` the same. From rest the tilt pair stays in a thin band along
-/// `r4 = d1 r3` (`|omega_x| <= 0.69`), which a box in `(r3, r4)` covers with mostly unreachable nodes and a box
-/// in `(theta_x, omega_x)` does not: the grid solver's coordinates for the x axis' ground truth.
-pub fn x_axis_tilt_rate() -> AffineSystem {
-    let mut system = x_axis();
-    system.id = X_AXIS_TILT_RATE_ID;
-    system.description =
-        "quad10d's x axis in tilt-rate coordinates (position error, velocity, tilt, the tilt's rate) tracking a 1-D point planner with speed bound beta_1";
-    system.state[3] = StateDim {
-        name: "omega_x",
-        unit: "rad/s",
-        min: -TILT_ANGULAR_RATE_HALF_WIDTH,
-        max: TILT_ANGULAR_RATE_HALF_WIDTH,
-        periodic: false,
-        limits: None,
-    };
-    system.drift = Drift {
-        n_state: 4,
-        terms: vec![
-            term(0, 1.0, &[Factor::Linear(1)]),
-            term(1, GRAVITY, &[Factor::Tan(2)]),
-            term(2, 1.0, &[Factor::Linear(3)]),
-            term(3, -D0, &[Factor::Linear(2)]),
-            term(3, -D1, &[Factor::Linear(3)]),
-        ],
-    };
-    system
-}
-
-/// `quad10d_x` coordinates `(r1, r2, r3, r4)` to [`x_axis_tilt_rate`]'s, `(r1, r2, r3, r4 - d1 r3)`.
-pub fn to_tilt_rate(r: &[f64]) -> [f64; 4] {
-    [r[0], r[1], r[2], r[3] - D1 * r[2]]
-}
-
-/// [`x_axis_tilt_rate`] coordinates back to `quad10d_x`'s: `r4 = omega_x + d1 theta_x`.
-pub fn from_tilt_rate(z: &[f64]) -> [f64; 4] {
-    [z[0], z[1], z[2], z[3] + D1 * z[2]]
-}
-
-/// The exact decomposition: the x axis on `r1..r4` with `beta_1`, the same subsystem on `r5..r8` with
-/// `beta_2`, and the z axis on `r9, r10` with `beta_3`.
+/// The exact decomposition: the x axis on coordinates 0..4 with `beta_1`, the same subsystem on 4..8 with
+/// `beta_2`, and the z axis on 8, 9 with `beta_3`.
 pub fn axes() -> Vec<DecomposedAxis> {
     vec![
         DecomposedAxis { subsystem: X_AXIS_ID, coords: vec![0, 1, 2, 3], param: 0 },
@@ -205,7 +168,7 @@ pub const CLIMB_ACCEL: f64 = K_T * THRUST_MAX - GRAVITY;
 /// Closed-form converged tracking error bound of the z subsystem, `V_min(beta_3) = beta_3^2 / a_up` with
 /// `a_up` = [`CLIMB_ACCEL`], the smaller of its two accelerations.
 ///
-/// With `e = r9`, `v = r10` and the planner's speed `w = +-beta`: a planner that holds `w = -beta` forces
+/// With `e = z_r`, `v = v_z` and the planner's speed `w = +-beta`: a planner that holds `w = -beta` forces
 /// `v` to `-beta` (else `e` grows without end), and a reversal to `+beta` then lowers `e` by at least
 /// `(2 beta)^2 / (2 a_up)` before `v` reaches `+beta`; the mirror reversal raises it by `(2 beta)^2 / (2 g)`,
 /// less. So every invariant band is at least `2 beta^2 / a_up` wide. The band between the curves
@@ -216,7 +179,7 @@ pub fn z_axis_closed_form_teb(beta: f64) -> f64 {
     beta * beta / CLIMB_ACCEL
 }
 
-/// The z subsystem `(r9, r10; beta_3)`: a double integrator whose acceleration box `[-g, (1.5 k_T - 1) g]`
+/// The z subsystem `(z_r, v_z; beta_3)`: a double integrator whose acceleration box `[-g, (1.5 k_T - 1) g]`
 /// is not symmetric.
 pub fn z_axis() -> AffineSystem {
     system()
