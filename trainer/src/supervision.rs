@@ -80,7 +80,8 @@ pub struct GridSupervision {
 impl GridSupervision {
     /// Loads and checks the solutions of `config` against the trained `system` (in its parameter mode) and
     /// the largest trained horizon `tau_max`. With one network parameter and several solutions, they must
-    /// share one grid and horizon and have distinct `beta`.
+    /// share one horizon and have distinct `beta`; their grids may differ (a domain scaled to each `beta`'s
+    /// error set) but each must overlap the next.
     pub fn load(
         config: &SupervisionConfig,
         system: &AffineSystem,
@@ -107,13 +108,31 @@ impl GridSupervision {
             let (first_path, first) = &solutions[0];
             for (path, s) in &solutions[1..] {
                 let mismatch = |problem: String| SupervisionError::Mismatch { path: path.clone(), problem };
-                if s.solution.grid.axes() != first.solution.grid.axes()
-                    || s.solution.info.horizon != first.solution.info.horizon
-                {
+                if s.solution.info.horizon != first.solution.info.horizon {
                     return Err(mismatch(format!(
-                        "blending in beta needs one grid and horizon for every solution; {} differs",
-                        first_path.display()
+                        "blending in beta needs one horizon for every solution; {} is at {} s, this one at {} s",
+                        first_path.display(),
+                        first.solution.info.horizon,
+                        s.solution.info.horizon
                     )));
+                }
+            }
+            for pair in solutions.windows(2) {
+                let (a, b) = (&pair[0].1.solution.grid, &pair[1].1.solution.grid);
+                let mismatch = |problem: String| SupervisionError::Mismatch { path: pair[1].0.clone(), problem };
+                for (x, y) in a.axes().iter().zip(b.axes()) {
+                    if x.name != y.name || x.periodic != y.periodic || x.max.min(y.max) <= x.min.max(y.min) {
+                        return Err(mismatch(format!(
+                            "axis `{}` [{}, {}] does not overlap `{}` [{}, {}] of {}, the solution at the next lower beta",
+                            y.name,
+                            y.min,
+                            y.max,
+                            x.name,
+                            x.min,
+                            x.max,
+                            pair[0].0.display()
+                        )));
+                    }
                 }
             }
             if let Some(w) = solutions.windows(2).find(|w| w[0].1.params == w[1].1.params) {
@@ -163,8 +182,9 @@ impl GridSupervision {
     /// the target is `(1 - w) V_a + w V_b` (`V` is nondecreasing in `beta`, since a faster planner only helps
     /// the adversary, so the blend lies between the two); otherwise the solutions are taken in turn with
     /// `w = 0`. The point is a node of the nearer solution (a `focus_share` of them from near its minimum),
-    /// moved uniformly within its cell, and the values there are the grid's multilinear interpolation: points
-    /// between the nodes keep the sine network from fitting the nodes while it oscillates between them.
+    /// moved uniformly within its cell and drawn again until it also lies in the other solution's grid, and
+    /// the values there are each grid's multilinear interpolation: points between the nodes keep the sine
+    /// network from fitting the nodes while it oscillates between them.
     pub fn batch(&self, iteration: u64, device: &Device) -> SupervisionBatch {
         let mut rng = rand::rngs::StdRng::seed_from_u64(self.seed ^ iteration.wrapping_mul(0xD1B5_4A32_D192_ED03));
         let m = self.points;
@@ -191,23 +211,19 @@ impl GridSupervision {
                 let s = &self.solutions[i % self.solutions.len()];
                 (s, s, 0.0)
             };
-            let nearer = if w < 0.5 { a } else { b };
-            let grid = &nearer.solution.grid;
-            let flat = if i < n_focus && !nearer.near_minimum.is_empty() {
-                nearer.near_minimum[rng.random_range(0..nearer.near_minimum.len())]
-            } else {
-                rng.random_range(0..nearer.solution.values.len())
-            };
-            grid.point(flat, &mut x);
-            for (xk, axis) in x.iter_mut().zip(grid.axes()) {
-                let moved = *xk + axis.spacing() * rng.random_range(-0.5..0.5);
-                *xk = if axis.periodic {
-                    axis.min + (moved - axis.min).rem_euclid(axis.max - axis.min)
-                } else {
-                    moved.clamp(axis.min, axis.max)
-                };
+            let (nearer, other) = if w < 0.5 { (a, b) } else { (b, a) };
+            let focus = i < n_focus && !nearer.near_minimum.is_empty();
+            for draw in 1.. {
+                draw_in_cell(nearer, focus, &mut rng, &mut x);
+                if inside(&other.solution, &x) {
+                    break;
+                }
+                if draw == MAX_DRAWS {
+                    clamp_into(&other.solution, &mut x);
+                    break;
+                }
             }
-            let value = |s: &Supervised| grid.interpolate(&s.solution.values, &x);
+            let value = |s: &Supervised| s.solution.grid.interpolate(&s.solution.values, &x);
             tau.push(a.solution.info.horizon as f32);
             state.extend(x.iter().map(|&v| v as f32));
             let row_params: Vec<f32> =
@@ -240,6 +256,42 @@ impl GridSupervision {
 }
 
 /// The Hamiltonian metric's weights `n alpha_j^2 / sum_k alpha_k^2` (all 1 where every `alpha` is 0).
+/// Draws of a point inside both solutions of a blend before it is clamped into the other one's box.
+const MAX_DRAWS: usize = 1000;
+
+/// A node of `s` (with `focus`, one near its minimum) moved uniformly within its cell, into `x`.
+fn draw_in_cell(s: &Supervised, focus: bool, rng: &mut impl Rng, x: &mut [f64]) {
+    let grid = &s.solution.grid;
+    let flat = if focus {
+        s.near_minimum[rng.random_range(0..s.near_minimum.len())]
+    } else {
+        rng.random_range(0..s.solution.values.len())
+    };
+    grid.point(flat, x);
+    for (xk, axis) in x.iter_mut().zip(grid.axes()) {
+        let moved = *xk + axis.spacing() * rng.random_range(-0.5..0.5);
+        *xk = if axis.periodic {
+            axis.min + (moved - axis.min).rem_euclid(axis.max - axis.min)
+        } else {
+            moved.clamp(axis.min, axis.max)
+        };
+    }
+}
+
+/// Whether `x` lies in the box of `solution`'s grid (periodic axes always do).
+fn inside(solution: &Solution, x: &[f64]) -> bool {
+    solution.grid.axes().iter().zip(x).all(|(a, &v)| a.periodic || (a.min..=a.max).contains(&v))
+}
+
+/// `x` clamped into the box of `solution`'s grid.
+fn clamp_into(solution: &Solution, x: &mut [f64]) {
+    for (v, a) in x.iter_mut().zip(solution.grid.axes()) {
+        if !a.periodic {
+            *v = v.clamp(a.min, a.max);
+        }
+    }
+}
+
 fn hamiltonian_weights(alpha: &[f64]) -> impl Iterator<Item = f64> + '_ {
     let total: f64 = alpha.iter().map(|a| a * a).sum();
     let n = alpha.len() as f64;

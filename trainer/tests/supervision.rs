@@ -3,7 +3,7 @@
 
 use burn::tensor::Device;
 use fastrack_grid::format::save;
-use fastrack_grid::grid::Grid;
+use fastrack_grid::grid::{Axis, Grid};
 use fastrack_grid::solver::{solve, Solution, SolverConfig};
 use fastrack_trainer::config::{GradientMetric, SupervisionConfig};
 use fastrack_trainer::supervision::GridSupervision;
@@ -12,13 +12,33 @@ use std::path::{Path, PathBuf};
 
 /// A short solve of `system` at `params` on a coarse grid, saved under `dir`.
 fn solved(dir: &Path, name: &str, system: &AffineSystem, params: &[f64], horizon: f64) -> (PathBuf, Solution) {
-    let resolution = vec![7; system.n_state()];
-    let grid = Grid::for_system(system, &resolution).unwrap();
+    let grid = Grid::for_system(system, &vec![7; system.n_state()]).unwrap();
+    solved_on(dir, name, system, params, horizon, &grid)
+}
+
+/// A short solve of `system` at `params` on `grid`, saved under `dir`.
+fn solved_on(
+    dir: &Path,
+    name: &str,
+    system: &AffineSystem,
+    params: &[f64],
+    horizon: f64,
+    grid: &Grid,
+) -> (PathBuf, Solution) {
     let config = SolverConfig { horizon_cap: horizon, tolerance: 1e-12, ..SolverConfig::default() };
-    let solution = solve(system, params, &grid, &config, false).unwrap();
+    let solution = solve(system, params, grid, &config, false).unwrap();
     let path = dir.join(name);
     save(&solution, &path).unwrap();
     (path, solution)
+}
+
+/// A 7x7 double-integrator grid over `x_r` in `x` and the whole velocity domain.
+fn di_grid(x: (f64, f64)) -> Grid {
+    Grid::new(vec![
+        Axis { name: "x_r".into(), min: x.0, max: x.1, n: 7, periodic: false },
+        Axis { name: "v".into(), min: -1.5, max: 1.5, n: 7, periodic: false },
+    ])
+    .unwrap()
 }
 
 fn config(solutions: Vec<PathBuf>) -> SupervisionConfig {
@@ -68,10 +88,16 @@ fn solutions_that_do_not_fit_the_run_are_refused_with_the_reason() {
     let message = refusal(&config(vec![di_path.clone()]), &narrow, 1.0);
     assert!(message.contains("beta = 0.75 outside the trained range [0.8, 1]"), "{message}");
 
-    // Blending in beta needs one grid and horizon, and distinct beta.
+    // Blending in beta needs one horizon, overlapping grids, and distinct beta.
     let (later, _) = solved(dir.path(), "later.ftgrid", &di, &[1.0], 0.3);
     let message = refusal(&config(vec![di_path.clone(), later]), &di, 1.0);
-    assert!(message.contains("needs one grid and horizon for every solution"), "{message}");
+    assert!(message.contains("needs one horizon for every solution"), "{message}");
+    let (left, _) = solved_on(dir.path(), "left.ftgrid", &di, &[0.75], 0.2, &di_grid((-2.0, -0.5)));
+    let (right, _) = solved_on(dir.path(), "right.ftgrid", &di, &[1.0], 0.2, &di_grid((0.5, 2.0)));
+    let message = refusal(&config(vec![left.clone(), right]), &di, 1.0);
+    assert!(message.contains("axis `x_r` [0.5, 2] does not overlap `x_r` [-2, -0.5]"), "{message}");
+    let (wide, _) = solved_on(dir.path(), "wide.ftgrid", &di, &[1.0], 0.2, &di_grid((-1.0, 2.0)));
+    assert!(GridSupervision::load(&config(vec![left, wide]), &di, 1.0, 1).is_ok(), "overlapping grids blend");
     let message = refusal(&config(vec![di_path.clone(), di_path.clone()]), &di, 1.0);
     assert!(message.contains("a second solution at beta = 0.75"), "{message}");
 
@@ -114,6 +140,31 @@ fn drawn_targets_blend_the_grid_values_in_beta_at_the_drawn_points() {
     let next = rows(supervision.batch(4, &Device::flex()).state);
     assert_eq!(again, state);
     assert_ne!(next, state);
+}
+
+#[test]
+fn blended_solutions_on_different_grids_give_targets_only_where_both_are_defined() {
+    let dir = tempfile::tempdir().unwrap();
+    let di = double_integrator::system();
+    // The lower beta on a box cut to x_r <= 0.5 (as a domain scaled to a smaller error set is).
+    let (low, low_solution) = solved_on(dir.path(), "low.ftgrid", &di, &[0.5], 0.3, &di_grid((-2.0, 0.5)));
+    let (high, high_solution) = solved(dir.path(), "high.ftgrid", &di, &[1.0], 0.3);
+    let supervision = GridSupervision::load(&config(vec![low, high]), &di, 1.0, 7).unwrap();
+    let batch = supervision.batch(5, &Device::flex());
+    let rows = |t: burn::tensor::Tensor<2>| t.into_data().try_to_vec::<f32>().unwrap();
+    let (state, params, target) = (rows(batch.state), rows(batch.params), rows(batch.target));
+    let mut near_the_cut = 0;
+    for i in 0..500 {
+        let x = [f64::from(state[2 * i]), f64::from(state[2 * i + 1])];
+        // f32 storage: within rounding of the cut.
+        assert!(x[0] <= 0.5 + 1e-6, "row {i}: {x:?} lies outside the lower beta's grid");
+        let w = (f64::from(params[i]) - 0.5) / 0.5;
+        let value = |s: &Solution| s.grid.interpolate(&s.values, &x);
+        let expected = (1.0 - w) * value(&low_solution) + w * value(&high_solution);
+        assert!((f64::from(target[i]) - expected).abs() < 1e-4, "row {i}: target {} vs blend {expected}", target[i]);
+        near_the_cut += usize::from(w > 0.5 && x[0] > 0.0);
+    }
+    assert!(near_the_cut > 20, "rows drawn from the wider grid up to the cut: {near_the_cut}");
 }
 
 #[test]
