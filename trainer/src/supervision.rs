@@ -255,7 +255,6 @@ impl GridSupervision {
     }
 }
 
-/// The Hamiltonian metric's weights `n alpha_j^2 / sum_k alpha_k^2` (all 1 where every `alpha` is 0).
 /// Draws of a point inside both solutions of a blend before it is clamped into the other one's box.
 const MAX_DRAWS: usize = 1000;
 
@@ -292,6 +291,7 @@ fn clamp_into(solution: &Solution, x: &mut [f64]) {
     }
 }
 
+/// The Hamiltonian metric's weights `n alpha_j^2 / sum_k alpha_k^2` (all 1 where every `alpha` is 0).
 fn hamiltonian_weights(alpha: &[f64]) -> impl Iterator<Item = f64> + '_ {
     let total: f64 = alpha.iter().map(|a| a * a).sum();
     let n = alpha.len() as f64;
