@@ -41,6 +41,11 @@ fn di_grid(x: (f64, f64)) -> Grid {
     .unwrap()
 }
 
+/// A batch tensor's entries, row-major.
+fn rows(t: burn::tensor::Tensor<2>) -> Vec<f32> {
+    t.into_data().try_to_vec::<f32>().unwrap()
+}
+
 fn config(solutions: Vec<PathBuf>) -> SupervisionConfig {
     SupervisionConfig {
         solutions,
@@ -118,7 +123,6 @@ fn drawn_targets_blend_the_grid_values_in_beta_at_the_drawn_points() {
     // Given out of order: sorted by beta.
     let supervision = GridSupervision::load(&config(vec![high, low]), &di, 1.0, 7).unwrap();
     let batch = supervision.batch(3, &Device::flex());
-    let rows = |t: burn::tensor::Tensor<2>| t.into_data().try_to_vec::<f32>().unwrap();
     let (tau, state, params, target) = (rows(batch.tau), rows(batch.state), rows(batch.params), rows(batch.target));
     assert_eq!((tau.len(), state.len(), params.len(), target.len()), (500, 1000, 500, 500));
     let (mut below, mut above) = (0, 0);
@@ -151,7 +155,6 @@ fn blended_solutions_on_different_grids_give_targets_only_where_both_are_defined
     let (high, high_solution) = solved(dir.path(), "high.ftgrid", &di, &[1.0], 0.3);
     let supervision = GridSupervision::load(&config(vec![low, high]), &di, 1.0, 7).unwrap();
     let batch = supervision.batch(5, &Device::flex());
-    let rows = |t: burn::tensor::Tensor<2>| t.into_data().try_to_vec::<f32>().unwrap();
     let (state, params, target) = (rows(batch.state), rows(batch.params), rows(batch.target));
     let mut near_the_cut = 0;
     for i in 0..500 {
@@ -183,7 +186,6 @@ fn targets_of_a_linear_field_are_its_values_and_its_slope_up_to_the_edges() {
     save(&solution, &path).unwrap();
     let supervision = GridSupervision::load(&config(vec![path]), &di, 1.0, 5).unwrap();
     let batch = supervision.batch(0, &Device::flex());
-    let rows = |t: burn::tensor::Tensor<2>| t.into_data().try_to_vec::<f32>().unwrap();
     let (state, target, gradient) = (rows(batch.state), rows(batch.target), rows(batch.target_gradient));
     let mut at_edge = 0;
     for i in 0..500 {
@@ -209,7 +211,6 @@ fn the_hamiltonian_metric_weighs_each_axis_by_its_squared_dissipation_bound() {
     let car = dubins4d::system().with_shared_parameter();
     let (low, _) = solved(dir.path(), "low.ftgrid", &dubins4d::system(), &[0.5, 0.5], 0.05);
     let (high, _) = solved(dir.path(), "high.ftgrid", &dubins4d::system(), &[1.25, 1.25], 0.05);
-    let rows = |t: burn::tensor::Tensor<2>| t.into_data().try_to_vec::<f32>().unwrap();
     let mut hamiltonian = config(vec![low.clone(), high.clone()]);
     hamiltonian.gradient_metric = GradientMetric::Hamiltonian;
     let batch = GridSupervision::load(&hamiltonian, &car, 1.0, 3).unwrap().batch(0, &Device::flex());
