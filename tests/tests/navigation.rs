@@ -3,12 +3,13 @@
 //! (checked at every sub-step); the baselines run through the same worlds with the same sensor, dynamics and
 //! control period, the reachability-based ones as safely.
 
-use fastrack_e2e::TestServer;
+use fastrack_e2e::{binary, run_binary, TestServer};
 use fastrack_sim::bench::{summarise, table, time_ratio};
 use fastrack_sim::episode::{Outcome, Run, RunSettings, Simulator};
 use fastrack_sim::methods::{Method, MppiSettings};
 use fastrack_sim::world::{World, WorldSpec};
 use std::path::Path;
+use std::process::Command;
 use std::sync::atomic::{AtomicBool, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -141,4 +142,26 @@ async fn a_run_never_holds_up_the_runtime_it_was_started_from() {
     assert_eq!(done.method, "MPPI");
     assert!(wall.as_secs_f64() > 1.0, "the run took {wall:?}: too short to tell");
     assert!(longest_gap.as_secs_f64() < 0.5, "the ticker waited {longest_gap:?} during a run of {wall:?}");
+}
+
+/// `sim world --feasible-for` generates a world for a larger sTEB than the model's (so that models of
+/// different bounds run on the same worlds) and refuses one below the model's.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn worlds_generated_for_a_larger_steb_keep_it_clear() {
+    let (server, simulator) = shipped().await;
+    let steb = simulator.steb_radius();
+    let dir = tempfile::tempdir().unwrap();
+    let out = dir.path().join("world.toml");
+    let world_args = |feasible_for: f64| {
+        let mut args = vec!["--server".to_string(), server.endpoint.clone(), "sim".into(), "world".into()];
+        args.extend(["--seed".into(), "4".into(), "--feasible-for".into(), feasible_for.to_string()]);
+        args
+    };
+    let mut larger = world_args(steb + 0.6);
+    larger.extend(["--out".into(), out.to_str().unwrap().into()]);
+    run_binary("fastrack", &larger.iter().map(String::as_str).collect::<Vec<_>>());
+    World::load(&out).unwrap().check_feasible(steb + 0.6).unwrap();
+    let refused = Command::new(binary("fastrack")).args(world_args(steb * 0.5)).output().unwrap();
+    let said = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success() && said.contains("--feasible-for must be"), "{said}");
 }

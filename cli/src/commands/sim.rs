@@ -100,9 +100,23 @@ struct Generation {
     /// Smallest and largest obstacle size (m): radius, half side, half length.
     #[arg(long, value_delimiter = ',', default_value = "0.4,1.5", num_args = 1)]
     size_range: Vec<f64>,
+    /// Worlds (generated or checked) must be feasible for this sTEB (m) instead of the model's, so that
+    /// models of different bounds run on the same worlds; at least the model's sTEB.
+    #[arg(long)]
+    #[serde(default)]
+    feasible_for: Option<f64>,
 }
 
 impl Generation {
+    /// The sTEB generated worlds are made feasible for: --feasible-for, or the model's `steb`.
+    fn inflation(&self, steb: f64) -> anyhow::Result<f64> {
+        match self.feasible_for {
+            None => Ok(steb),
+            Some(m) if m.is_finite() && m >= steb => Ok(m),
+            Some(m) => anyhow::bail!("--feasible-for must be a finite sTEB of at least the model's, {steb} m; got {m}"),
+        }
+    }
+
     fn spec(&self, seed: u64, inflation: f64) -> anyhow::Result<WorldSpec> {
         let (&[w, h], &[lo, hi]) = (self.size.as_slice(), self.size_range.as_slice()) else {
             anyhow::bail!("--size and --size-range take two numbers each, e.g. --size 30,20 --size-range 0.4,1.5");
@@ -238,11 +252,12 @@ async fn speeds(client: &FastrackClient, model: &str) -> anyhow::Result<Vec<Spee
 
 /// The world of a run: the file, or the seed's generated world.
 fn world_of(file: Option<&PathBuf>, generation: &Generation, seed: u64, steb: f64) -> anyhow::Result<World> {
+    let inflation = generation.inflation(steb)?;
     let world = match file {
         Some(path) => World::load(path)?,
-        None => generation.spec(seed, steb)?.generate()?,
+        None => generation.spec(seed, inflation)?.generate()?,
     };
-    world.check_feasible(steb).context("the world is not feasible for the model's sTEB")?;
+    world.check_feasible(inflation).context("the world is not feasible for the sTEB")?;
     Ok(world)
 }
 
@@ -337,7 +352,8 @@ async fn bench(client: &FastrackClient, args: BenchArgs, json_mode: bool) -> any
         "control_period_s": simulator.control_period(), "substeps": args.simulation.substeps,
         "sensor_range_m": simulator.sensor_range(), "time_limit_s": args.simulation.time_limit,
         "disturbance_m_s": args.simulation.disturbance,
-        "world": {"size": args.generation.size, "density": args.generation.density, "size_range": args.generation.size_range}});
+        "world": {"size": args.generation.size, "density": args.generation.density, "size_range": args.generation.size_range,
+            "feasible_for": args.generation.feasible_for}});
     let wall_s = started.elapsed().as_secs_f64();
     if let Some(dir) = &args.part_dir {
         let part = BenchPart { config, shard, wall_s, items: runs };
@@ -539,7 +555,7 @@ async fn fleet(client: &FastrackClient, args: FleetArgs, json_mode: bool) -> any
 }
 
 async fn world(client: &FastrackClient, args: WorldArgs, json_mode: bool) -> anyhow::Result<()> {
-    let steb = speeds(client, &args.model).await?[0].level;
+    let steb = args.generation.inflation(speeds(client, &args.model).await?[0].level)?;
     let world = world_of(args.check.as_ref(), &args.generation, args.seed, steb)?;
     let text = world.to_toml();
     match (&args.check, &args.out) {
