@@ -8,22 +8,29 @@
 //!    replan flag is set;
 //! 4. adjusts the planner (adjustPlannerControl): when `beta_query < beta_old`, keeps `p*`, the raw-path
 //!    state closest to the tracker, if `s - Q p*` lies inside `dTEBmax`, else resets the planner to a free
-//!    point of the inflated map with `s - Q p` inside `dTEBmax` and flags a replan; otherwise moves the
-//!    planner along the raw path for one control period at per-axis speed at most `beta_query`;
-//! 5. reads `u*` at `r_next = s - Q p_next` under `beta_query`.
+//!    point of the inflated map with `s - Q p` inside `dTEBmax` and flags a replan, else (no such point: the
+//!    tracker's speed or heading lies outside the smaller set) holds: the planner waits where it is with
+//!    `beta_old` and its bound still in force, and the drop is tried again at the next step; otherwise moves
+//!    the planner along the raw path for one control period at per-axis speed at most `beta_query`;
+//! 5. reads `u*` at `r_next = s - Q p_next` under `beta_query` (`beta_old` on a hold).
 //!
 //! The tick that carries `p_next` (or the candidate `p*`) returns `beta_query`, the bound's membership and
-//! `u*` together, so the common branch costs one round trip; each rejected reset candidate costs one more.
+//! `u*` together, so the common branch costs one round trip; a reset asks about all its candidates in one
+//! `TrackingControl` batch and then ticks the chosen one; a hold reads its control with one more
+//! `TrackingControl` call under `beta_old`.
 //! The server's `beta_query` is checked against the local one: a table that changed under the loop (the
 //! model was reloaded) is fetched again and the step repeated once.
 
 use crate::geometry::{clearance, norm, remember, sub, Obstacle, Point};
 use crate::raw_path::{advance_along, PlanError, PlanRequest, RawPathPlanner};
 use fastrack_client::{pb, ClientError, FastrackClient, TrackStream};
-use fastrack_proto::planner_speed::{query_planner_control, SpeedRow};
+use fastrack_proto::planner_speed::{query_planner_control, row_for, SpeedRow};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use std::collections::VecDeque;
+
+/// Out-of-domain states are answered with a flag, as on the `Track` stream.
+const FLAG: pb::OutOfDomainPolicy = pb::OutOfDomainPolicy::Flag;
 
 /// How the loop runs.
 #[derive(Debug, Clone, PartialEq)]
@@ -36,7 +43,7 @@ pub struct LoopSettings {
     pub goal: Point,
     /// The workspace, `(min, max)`, for the raw-path planner.
     pub bounds: (Point, Point),
-    /// Reset candidates tried per reset before giving up.
+    /// Reset candidates asked about per reset before the planner holds.
     pub reset_candidates: usize,
     /// Seed of the reset candidates.
     pub seed: u64,
@@ -51,6 +58,10 @@ pub enum Branch {
     Keep,
     /// `beta_query < beta_old` and `s - Q p*` outside `dTEBmax`: the planner was reset, a replan flagged.
     Reset,
+    /// `beta_query < beta_old` and no free planner state within `dTEBmax` of the tracker inside it: the
+    /// planner waits where it is (a planner at rest obeys every speed bound), `beta_old` and its bound stay
+    /// in force, and the drop is tried again at the next step.
+    Hold,
 }
 
 /// What one step decided.
@@ -60,7 +71,7 @@ pub struct StepReport {
     pub d_obs: Option<f64>,
     /// The previous step's `beta_query`.
     pub beta_old: f64,
-    /// This step's planner speed bound.
+    /// This step's planner speed bound (`beta_old` on a hold).
     pub beta_query: f64,
     /// `dTEBmax`: the TEB radius at `beta_query`, the bound the tracking error must keep this step.
     pub dteb_radius: f64,
@@ -82,7 +93,7 @@ pub struct StepReport {
     pub in_teb: bool,
     /// `r_next` lies inside the model's trained domain.
     pub in_domain: bool,
-    /// Ticks sent in this step (1 on the common branch).
+    /// Ticks and calls sent in this step (1 on the common branch).
     pub round_trips: usize,
 }
 
@@ -111,16 +122,6 @@ pub enum LoopError {
     /// The tracker state does not fit the model.
     #[error("tracker state: {0}")]
     Tracker(String),
-    /// No reset candidate was free and inside `dTEBmax`.
-    #[error(
-        "no free planner state within {dteb_radius} m of the tracker lies inside the bound after {tried} candidates"
-    )]
-    NoResetPoint {
-        /// `dTEBmax`.
-        dteb_radius: f64,
-        /// Candidates tried.
-        tried: usize,
-    },
     /// The server's `beta_query` still differed from the loop's after the table was fetched again.
     #[error("the server chose beta {server} where the table gives {local}: the model changes under the loop")]
     TableMismatch {
@@ -140,6 +141,7 @@ pub struct OnlineLoop {
     /// `Q`, row-major `n_state x 2`.
     planner_to_state: Vec<f64>,
     n_state: usize,
+    n_params: usize,
     beta_query: f64,
     replan_flag: bool,
     planner: Point,
@@ -178,6 +180,7 @@ impl OnlineLoop {
             speeds,
             planner_to_state: info.planner_to_state,
             n_state: info.state.len(),
+            n_params: info.params.len(),
             beta_query: beta_u,
             replan_flag: true,
             planner: start,
@@ -272,8 +275,13 @@ impl OnlineLoop {
                 self.raw_path.drain(..index);
                 (Branch::Keep, p_star, reply)
             } else {
-                let (candidate, reply, tried) = self.reset_point(tracker, position, d_obs, speed).await?;
-                round_trips += tried;
+                let (candidate, calls) = self.reset_point(tracker, position, speed).await?;
+                round_trips += calls;
+                let Some(candidate) = candidate else {
+                    return self.hold(tracker, d_obs, beta_old, speed, replanned, round_trips).await;
+                };
+                round_trips += 1;
+                let reply = self.tick(tracker, candidate, d_obs, speed.beta).await?;
                 self.raw_path.clear();
                 self.replan_flag = true;
                 (Branch::Reset, candidate, reply)
@@ -318,16 +326,16 @@ impl OnlineLoop {
             .unwrap_or((0, self.planner))
     }
 
-    /// A free planner state with `s - Q p` inside `dTEBmax`: the tracker's own position first, then points
-    /// drawn uniformly in the disc of radius `dTEBmax` around it, each checked by the server.
+    /// A free planner state with `s - Q p` inside `dTEBmax`, if there is one among the candidates: the
+    /// tracker's own position first, then points drawn uniformly in the disc of radius `dTEBmax` around it,
+    /// the free ones asked about in one `TrackingControl` batch. Also returns the calls made.
     async fn reset_point(
         &mut self,
         tracker: &[f64],
         position: Point,
-        d_obs: Option<f64>,
         speed: fastrack_proto::planner_speed::PlannerSpeed,
-    ) -> Result<(Point, pb::TrackReply, usize), LoopError> {
-        let mut tried = 0;
+    ) -> Result<(Option<Point>, usize), LoopError> {
+        let mut free = Vec::with_capacity(self.settings.reset_candidates);
         for k in 0..self.settings.reset_candidates {
             let candidate = if k == 0 {
                 position
@@ -338,16 +346,67 @@ impl OnlineLoop {
                 );
                 [position[0] + radius * angle.cos(), position[1] + radius * angle.sin()]
             };
-            if clearance(&self.obstacles, candidate) <= speed.steb_radius {
-                continue;
-            }
-            tried += 1;
-            let reply = self.tick(tracker, candidate, d_obs, speed.beta).await?;
-            if reply.in_teb {
-                return Ok((candidate, reply, tried));
+            if clearance(&self.obstacles, candidate) > speed.steb_radius {
+                free.push(candidate);
             }
         }
-        Err(LoopError::NoResetPoint { dteb_radius: speed.dteb_radius, tried })
+        if free.is_empty() {
+            return Ok((None, 0));
+        }
+        let states = free.iter().flat_map(|&p| self.relative_state(tracker, p)).collect();
+        let params = vec![speed.beta; free.len() * self.n_params];
+        let reply = self.client.tracking_control(self.settings.model.clone(), states, params, FLAG).await?;
+        let inside = free.into_iter().zip(reply.in_teb).find_map(|(p, inside)| inside.then_some(p));
+        Ok((inside, 1))
+    }
+
+    /// The hold branch: the planner waits at its state, and `u*` is read under `beta_old` (the row answering
+    /// for it in the current table), whose bound stays in force.
+    async fn hold(
+        &mut self,
+        tracker: &[f64],
+        d_obs: Option<f64>,
+        beta_old: f64,
+        speed: fastrack_proto::planner_speed::PlannerSpeed,
+        replanned: bool,
+        round_trips: usize,
+    ) -> Result<StepReport, LoopError> {
+        let server_beta_u = self.speeds.last().map_or(f64::NAN, |row| row.beta);
+        let row = row_for(&self.speeds, beta_old)
+            .map(|i| self.speeds[i])
+            .ok_or(LoopError::TableMismatch { local: beta_old, server: server_beta_u })?;
+        let relative_state = self.relative_state(tracker, self.planner);
+        let params = vec![row.beta; self.n_params];
+        let reply =
+            self.client.tracking_control(self.settings.model.clone(), relative_state.clone(), params, FLAG).await?;
+        let (Some(&value), Some(&in_teb), Some(&in_domain)) =
+            (reply.values.first(), reply.in_teb.first(), reply.in_domain.first())
+        else {
+            return Err(LoopError::Setup("TrackingControl answered no item for the held state".into()));
+        };
+        self.beta_query = row.beta;
+        Ok(StepReport {
+            d_obs,
+            beta_old,
+            beta_query: row.beta,
+            dteb_radius: row.level,
+            steb_radius: speed.steb_radius,
+            replanned,
+            branch: Branch::Hold,
+            planner: self.planner,
+            control: reply.controls,
+            relative_state,
+            value,
+            in_teb,
+            in_domain,
+            round_trips: round_trips + 1,
+        })
+    }
+
+    /// `r = s - Q p`.
+    fn relative_state(&self, tracker: &[f64], p: Point) -> Vec<f64> {
+        let q = &self.planner_to_state;
+        (0..self.n_state).map(|i| tracker[i] - q[2 * i] * p[0] - q[2 * i + 1] * p[1]).collect()
     }
 
     /// One tick with planner state `p`; checks the server's `beta_query` against `beta`.

@@ -1,6 +1,6 @@
 //! The benchmark of the paper's Table 1: every method through the same seeded worlds, summarised per
-//! method (reached, collisions, bounds exceeded, time to goal, clearance, replans, resets, ticks, decision
-//! latency), beside the paper's figures. A benchmark may be split into shards of worlds (`--shard`), each
+//! method (reached, collisions, bounds exceeded, time to goal, clearance, replans, resets, held steps, ticks,
+//! decision latency), beside the paper's figures. A benchmark may be split into shards of worlds (`--shard`), each
 //! writing a [`BenchPart`]; merged, the parts give the runs a single process gives.
 
 use crate::episode::{Outcome, Run};
@@ -73,6 +73,8 @@ pub struct Summary {
     pub replans: f64,
     /// Mean planner resets per run.
     pub resets: f64,
+    /// Mean control periods per run in which the planner held with the previous bound.
+    pub held_steps: f64,
     /// Mean server calls per run.
     pub round_trips: f64,
     /// Control periods, over every run, whose control was read outside the trained domain.
@@ -110,6 +112,7 @@ pub fn summarise(method: &str, runs: &[&Run]) -> Summary {
         worst_excess: runs.iter().filter_map(|r| r.worst_excess).reduce(f64::max),
         replans: mean(&|r| r.replans),
         resets: mean(&|r| r.resets),
+        held_steps: mean(&|r| r.held_steps),
         round_trips: mean(&|r| r.round_trips),
         out_of_domain: runs.iter().map(|r| r.out_of_domain).sum(),
         decision_p50: rank(0.5).unwrap_or_default(),
@@ -135,6 +138,7 @@ pub fn table(summaries: &[Summary]) -> Table {
         "largest error - bound (m)",
         "replans",
         "resets",
+        "held steps",
         "server calls",
         "steps out of domain",
         "decision p50 / p99 (ms)",
@@ -152,6 +156,7 @@ pub fn table(summaries: &[Summary]) -> Table {
             s.worst_excess.map_or("-".into(), |e| format!("{e:.3}")),
             format!("{:.1}", s.replans),
             format!("{:.1}", s.resets),
+            format!("{:.1}", s.held_steps),
             format!("{:.0}", s.round_trips),
             s.out_of_domain.to_string(),
             format!("{:.3} / {:.3}", s.decision_p50.as_secs_f64() * 1e3, s.decision_p99.as_secs_f64() * 1e3),
@@ -204,7 +209,7 @@ pub fn summary_json(s: &Summary) -> Value {
         "bound_exceeded": s.bound_exceeded, "timed_out_or_gave_up": s.other,
         "time_to_goal_mean_s": s.time_to_goal.map(|t| t.0), "time_to_goal_sd_s": s.time_to_goal.map(|t| t.1),
         "min_clearance_m": s.min_clearance, "largest_error_minus_bound_m": s.worst_excess,
-        "replans_mean": s.replans, "resets_mean": s.resets, "server_calls_mean": s.round_trips, "steps_out_of_domain": s.out_of_domain,
+        "replans_mean": s.replans, "resets_mean": s.resets, "held_steps_mean": s.held_steps, "server_calls_mean": s.round_trips, "steps_out_of_domain": s.out_of_domain,
         "decision_p50_ms": s.decision_p50.as_secs_f64() * 1e3, "decision_p99_ms": s.decision_p99.as_secs_f64() * 1e3,
     })
 }

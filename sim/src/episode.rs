@@ -129,6 +129,9 @@ pub struct Run {
     pub replans: usize,
     /// Planner resets.
     pub resets: usize,
+    /// Control periods in which the planner held its state with the previous bound in force.
+    #[serde(default)]
+    pub held_steps: usize,
     /// Calls to the server (ticks or unary calls).
     pub round_trips: usize,
     /// Control periods whose control was read outside the model's trained domain (extrapolated).
@@ -253,6 +256,7 @@ impl Simulator {
             worst_excess: None,
             replans: 0,
             resets: 0,
+            held_steps: 0,
             round_trips: 0,
             out_of_domain: 0,
             decision_times: Vec::new(),
@@ -294,6 +298,7 @@ impl Simulator {
             run.decision_times.push(started.elapsed());
             run.replans += usize::from(decision.replanned);
             run.resets += usize::from(decision.reset);
+            run.held_steps += usize::from(decision.held);
             run.round_trips += decision.round_trips;
             run.out_of_domain += usize::from(decision.out_of_domain);
             if let Some(disturbance) = &settings.disturbance {

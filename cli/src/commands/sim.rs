@@ -264,7 +264,7 @@ fn world_of(file: Option<&PathBuf>, generation: &Generation, seed: u64, steb: f6
 fn run_line(run: &Run) -> String {
     let latency = LatencySummary::from_latencies(&mut run.decision_times.clone());
     format!(
-        "{}: {} after {:.2} s; min clearance {:.3} m; largest error - bound {}; replans {}, resets {}, server calls {}, steps out of domain {}; decision p50 {:.3} ms, p99 {:.3} ms{}",
+        "{}: {} after {:.2} s; min clearance {:.3} m; largest error - bound {}; replans {}, resets {}, held steps {}, server calls {}, steps out of domain {}; decision p50 {:.3} ms, p99 {:.3} ms{}",
         run.method,
         run.outcome.label(),
         run.time,
@@ -272,6 +272,7 @@ fn run_line(run: &Run) -> String {
         run.worst_excess.map_or("-".into(), |e| format!("{e:.3} m")),
         run.replans,
         run.resets,
+        run.held_steps,
         run.round_trips,
         run.out_of_domain,
         latency.p50.as_secs_f64() * 1e3,
@@ -299,7 +300,7 @@ async fn run_one(client: &FastrackClient, args: RunArgs, json_mode: bool) -> any
     print(
         json_mode,
         json!({"method": run.method, "outcome": run.outcome.label(), "time_s": run.time, "min_clearance_m": run.min_clearance,
-               "largest_error_minus_bound_m": run.worst_excess, "replans": run.replans, "resets": run.resets,
+               "largest_error_minus_bound_m": run.worst_excess, "replans": run.replans, "resets": run.resets, "held_steps": run.held_steps,
                "server_calls": run.round_trips, "steps_out_of_domain": run.out_of_domain, "plot": args.plot, "plot_over_time": over}),
         || format!("{}\nfigures: {} and {}", run_line(&run), args.plot.display(), over.display()),
     );

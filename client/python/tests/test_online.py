@@ -36,7 +36,6 @@ from fastrack.online import (
     GridAStar,
     LoopSetupError,
     NoPath,
-    NoResetPoint,
     OnlineLoop,
     OnlineLoopError,
     PlanError,
@@ -213,13 +212,16 @@ def test_the_planner_advances_at_most_beta_dt_per_axis(client: fastrack.Client) 
     with online(client, goal=(6.0, 3.0), planner=StraightLine()) as diagonal:
         step = diagonal.step([0.0, 0.0, ALONG_X, 1.0])
         np.testing.assert_allclose(step.planner, [0.125, 0.0625], rtol=0, atol=1e-12)
-        assert step.control.shape == (2,) and step.in_teb and step.in_domain
+        # A planner 0.14 m ahead after one 0.1 s period leaves the tracker on the edge of the tight set at
+        # beta_u: the reply says where it is, inside the trained domain.
+        assert step.control.shape == (2,) and step.in_domain and math.isfinite(step.value)
     # Around a disc (the A* path turns): every advance step moves each axis at most beta dt.
     with online(client, control_period=0.05) as loop:
         disc = Circle((5.0, 0.3), 1.0)
         previous, advances = np.array(loop.planner_state), 0
         for _ in range(100):
-            step = loop.step([*loop.planner_state, ALONG_X, 1.0], [disc])  # the tracker on the planner
+            # The tracker on the planner, slow (0.5 m/s): inside every row's set, so no drop has to hold.
+            step = loop.step([*loop.planner_state, ALONG_X, 0.5], [disc])
             if step.branch == "advance":
                 advances += 1
                 assert step.round_trips == 1
@@ -266,14 +268,41 @@ def test_a_drop_in_beta_far_from_the_plan_resets_the_planner_inside_the_bound(cl
         assert not loop.replan_flag and loop.raw_path[-1] == (10.0, 0.0)
 
 
-def test_no_free_reset_point_is_an_error(client: fastrack.Client) -> None:
+def held_control(client: fastrack.Client, step: StepReport) -> np.ndarray:
+    """``u*`` at the step's relative state under its (held) ``beta_query``, asked of the server directly."""
+    n_params = len(client.get_model(MODEL).params)
+    params = np.full((1, n_params), step.beta_query)
+    answer = client.tracking_control(MODEL, [step.relative_state], params, out_of_domain="flag")
+    return np.asarray(answer.controls[0], dtype=np.float64)
+
+
+def test_no_free_reset_point_holds_the_planner_under_the_old_bound(client: fastrack.Client) -> None:
     with online(client, reset_candidates=8) as loop:
-        loop.step([0.0, 0.0, ALONG_X, 1.0])
+        first = loop.step([0.0, 0.0, ALONG_X, 1.0])
         # The tracker on the edge of a block 3 m off the plan: every point within dTEBmax = sTEB of it lies
         # within the sTEB of the block.
-        with pytest.raises(NoResetPoint, match="after 0 candidates") as caught:
-            loop.step([0.0, 3.0, ALONG_X, 1.0], [Rectangle((-1.0, 3.0), (1.0, 4.0))])
-        assert caught.value.tried == 0 and isinstance(caught.value, OnlineLoopError)
+        step = loop.step([0.0, 3.0, ALONG_X, 1.0], [Rectangle((-1.0, 3.0), (1.0, 4.0))])
+        assert step.branch == "hold", step
+        assert (step.beta_old, step.beta_query, step.dteb_radius) == (first.beta_query,) * 2 + (first.dteb_radius,)
+        np.testing.assert_array_equal(step.planner, first.planner)
+        assert step.round_trips == 2, "p*, then the held control: no candidate was free to ask about"
+        np.testing.assert_allclose(step.relative_state, [-0.125, 3.0, ALONG_X, 1.0], rtol=0, atol=1e-12)
+        np.testing.assert_array_equal(step.control, held_control(client, step))
+
+
+def test_a_fast_tracker_outside_every_smaller_set_holds_until_it_slows(client: fastrack.Client) -> None:
+    with online(client) as loop:
+        fast = [0.0, 0.0, ALONG_X, 2.5]
+        first = loop.step(fast)
+        obstacle = Circle((3.6, 0.0), 0.5)
+        step = loop.step(fast, [obstacle])
+        assert step.branch == "hold" and step.beta_query == first.beta_query, step
+        assert step.d_obs is not None and step.dteb_radius > step.d_obs / 2, "the old bound stays in force"
+        assert step.round_trips == 3, "p*, one batch of reset candidates, the held control"
+        np.testing.assert_array_equal(step.control, held_control(client, step))
+        slow = [float(step.planner[0]), float(step.planner[1]), ALONG_X, 1.0]
+        after = loop.step(slow, [obstacle])
+        assert after.branch == "keep" and after.beta_query < after.beta_old and after.in_teb, after
 
 
 def test_bad_tracker_states_and_settings_are_clear_errors(client: fastrack.Client) -> None:
@@ -403,11 +432,14 @@ def test_speed_choice_agrees_with_query_planner_control(client: fastrack.Client)
             expected_d = clearance(seen, (tracker[0], tracker[1])) if seen else None
             assert step.d_obs == expected_d
             served = client.query_planner_control(MODEL, step.d_obs)
-            assert (step.beta_query, step.dteb_radius, step.steb_radius) == (
-                served.beta_query,
-                served.dteb_radius,
-                served.steb_radius,
-            ), k
+            if step.branch == "hold":  # the old row stays in force, above the rule's choice
+                assert step.beta_query == step.beta_old > served.beta_query, k
+            else:
+                assert (step.beta_query, step.dteb_radius, step.steb_radius) == (
+                    served.beta_query,
+                    served.dteb_radius,
+                    served.steb_radius,
+                ), k
             r = np.array(tracker) - np.array([*step.planner, 0.0, 0.0])
             np.testing.assert_allclose(step.relative_state[:2], r[:2], rtol=0, atol=1e-12)
     assert {"advance", "keep"} <= branches, branches
@@ -487,7 +519,7 @@ def test_closed_loop_run_reaches_the_goal_safely(client: fastrack.Client) -> Non
     assert run.out_of_domain == 0
     assert len(run.betas) > 1 and min(run.betas) < 1.25, "the speed adapted to the obstacles"
     assert run.replans >= 2, "each newly sensed obstacle is planned around"
-    assert run.round_trips <= run.steps + 64 * run.branches.get("reset", 0)
+    assert run.round_trips <= run.steps + 2 * (run.branches.get("reset", 0) + run.branches.get("hold", 0))
 
 
 # --- the example ----------------------------------------------------------------------------------------------

@@ -131,6 +131,7 @@ impl LevelPlanner {
             bound: Some(self.levels[self.current].level),
             replanned,
             reset: false,
+            held: false,
             round_trips: 1,
             out_of_domain: !in_domain,
         })

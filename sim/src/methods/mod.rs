@@ -86,6 +86,9 @@ pub struct Decision {
     pub replanned: bool,
     /// The planner was reset (Parametric FaSTrack's adjustPlannerControl).
     pub reset: bool,
+    /// The planner held its state with the previous, larger bound in force (adjustPlannerControl found no
+    /// planner state inside the smaller one).
+    pub held: bool,
     /// Calls to the server this period.
     pub round_trips: usize,
     /// The control was read at a relative state outside the model's trained domain (extrapolated).

@@ -111,6 +111,7 @@ impl Mppi {
             bound: None,
             replanned,
             reset: false,
+            held: false,
             round_trips: 0,
             out_of_domain: false,
         })

@@ -36,6 +36,7 @@ impl Parametric {
             bound: Some(report.dteb_radius),
             replanned: report.replanned,
             reset: report.branch == Branch::Reset,
+            held: report.branch == Branch::Hold,
             round_trips: report.round_trips,
             out_of_domain: !report.in_domain,
         })

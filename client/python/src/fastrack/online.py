@@ -13,13 +13,16 @@ Each :meth:`OnlineLoop.step` takes the tracker state and the obstacles sensed no
 4. adjusts the planner (adjustPlannerControl): when ``beta_query < beta_old``, keeps ``p*``, the state of the
    planner and its raw path closest to the tracker, if ``s - Q p*`` lies inside ``dTEBmax`` (branch
    ``"keep"``), else resets the planner to a free point of the inflated map with ``s - Q p`` inside
-   ``dTEBmax`` and flags a replan (branch ``"reset"``); otherwise moves the planner along the raw path for
-   one control period, each axis at most ``beta_query dt`` (branch ``"advance"``);
-5. reads ``u*`` at ``r_next = s - Q p_next`` under ``beta_query``.
+   ``dTEBmax`` and flags a replan (branch ``"reset"``), else (no such point: the tracker's speed or heading
+   lies outside the smaller set) holds: the planner waits where it is with ``beta_old`` and its bound still
+   in force, and the drop is tried again at the next step (branch ``"hold"``); otherwise moves the planner
+   along the raw path for one control period, each axis at most ``beta_query dt`` (branch ``"advance"``);
+5. reads ``u*`` at ``r_next = s - Q p_next`` under ``beta_query`` (``beta_old`` on a hold).
 
 The tick that carries ``p_next`` (or the candidate ``p*``) returns ``beta_query``, the bound's membership
-and ``u*`` together, so the common branch costs one round trip; each reset candidate the server rejects
-costs one more. The server's ``beta_query`` is checked against the local one: a table that changed under
+and ``u*`` together, so the common branch costs one round trip; a reset asks about all its candidates in
+one ``TrackingControl`` batch and then ticks the chosen one; a hold reads its control with one more
+``TrackingControl`` call under ``beta_old``. The server's ``beta_query`` is checked against the local one: a table that changed under
 the loop (the model was reloaded) is fetched again and the step taken again, once.
 
 >>> import fastrack
@@ -66,11 +69,12 @@ from .results import TrackReply
 from .track import TrackStream
 from .v1 import models_pb2
 
-Branch = Literal["advance", "keep", "reset"]
+Branch = Literal["advance", "keep", "reset", "hold"]
 """adjustPlannerControl's branch: ``"advance"`` (``beta_query >= beta_old``: the planner moved along the raw
 path), ``"keep"`` (``beta_query < beta_old`` and ``s - Q p*`` inside ``dTEBmax``: the planner jumped to
 ``p*``), ``"reset"`` (``s - Q p*`` outside it: the planner was reset to a free point inside it, a replan
-flagged)."""
+flagged), ``"hold"`` (no free point within ``dTEBmax`` of the tracker inside it: the planner waited where it
+is, ``beta_old`` and its bound still in force)."""
 
 
 # --- errors -------------------------------------------------------------------------------------------------
@@ -102,18 +106,6 @@ class GoalBlocked(PlanError):
 
 class NoPath(PlanError):
     """No path keeps the inflation from every sensed obstacle."""
-
-
-class NoResetPoint(OnlineLoopError):
-    """No free reset candidate within ``dTEBmax`` of the tracker was inside the bound."""
-
-    def __init__(self, dteb_radius: float, tried: int) -> None:
-        self.dteb_radius = dteb_radius
-        self.tried = tried
-        super().__init__(
-            f"no free planner state within {dteb_radius} m of the tracker lies inside the bound after {tried} "
-            "candidates"
-        )
 
 
 class TableMismatch(OnlineLoopError):
@@ -435,7 +427,7 @@ class StepReport:
     beta_old: float
     """The previous step's ``beta_query`` (``beta_u`` before the first step), m/s."""
     beta_query: float
-    """This step's planner speed bound, m/s."""
+    """This step's planner speed bound, m/s (``beta_old`` on a hold)."""
     dteb_radius: float
     """``dTEBmax``: the TEB radius at ``beta_query``, the bound the tracking error keeps this step, metres."""
     steb_radius: float
@@ -457,7 +449,7 @@ class StepReport:
     in_domain: bool
     """``r_next`` lies inside the model's trained domain (False: treat the control as unsupported)."""
     round_trips: int
-    """Ticks sent in this step (1 on the common branch)."""
+    """Ticks and calls sent in this step (1 on the common branch)."""
 
 
 class OnlineLoop:
@@ -467,7 +459,7 @@ class OnlineLoop:
     metres for ``dubins4d``); ``bounds`` = ``(min, max)`` the workspace the raw path stays in;
     ``control_period`` the control period ``dt`` in seconds (the planner moves at most ``beta_query dt``
     per axis per step); ``planner`` the raw-path planner (:class:`GridAStar` by default);
-    ``reset_candidates`` how many reset candidates a reset tries before giving up; ``seed`` seeds them.
+    ``reset_candidates`` how many reset candidates a reset asks about before the planner holds; ``seed`` seeds them.
     The model's description (its TEB table, ``Q``) is fetched with ``GetModel`` and its stream opened at
     once; use the loop as a context manager, or call :meth:`close`.
     """
@@ -514,6 +506,7 @@ class OnlineLoop:
         self._speeds = speed_rows(info)
         self._state_names = tuple(d.name for d in info.state)
         self._n_state = len(info.state)
+        self._n_params = len(info.params)
         q = list(info.planner_to_state)
         if len(q) != 2 * self._n_state:
             raise LoopSetupError(
@@ -640,8 +633,12 @@ class OnlineLoop:
                     self._raw_path.popleft()
                 branch, p_next = "keep", p_star
             else:
-                p_next, reply, tried = self._reset_point(tracker, position, d_obs, speed)
-                round_trips += tried
+                candidate, calls = self._reset_point(tracker, position, speed)
+                round_trips += calls
+                if candidate is None:
+                    return self._hold(tracker, d_obs, beta_old, speed, replanned, round_trips)
+                round_trips += 1
+                p_next, reply = candidate, self._tick(tracker, candidate, d_obs, speed.beta)
                 self._raw_path.clear()
                 self._replan_flag = True
                 branch = "reset"
@@ -700,12 +697,11 @@ class OnlineLoop:
                 best, best_distance = (k, p), distance
         return best
 
-    def _reset_point(
-        self, tracker: list[float], position: Point, d_obs: float | None, speed: PlannerSpeed
-    ) -> tuple[Point, TrackReply, int]:
-        """A free planner state with ``s - Q p`` inside ``dTEBmax``: the tracker's own position first, then
-        points drawn uniformly in the disc of radius ``dTEBmax`` around it, each checked by the server."""
-        tried = 0
+    def _reset_point(self, tracker: list[float], position: Point, speed: PlannerSpeed) -> tuple[Point | None, int]:
+        """A free planner state with ``s - Q p`` inside ``dTEBmax``, if there is one among the candidates: the
+        tracker's own position first, then points drawn uniformly in the disc of radius ``dTEBmax`` around
+        it, the free ones asked about in one ``TrackingControl`` batch. Also returns the calls made."""
+        free: list[Point] = []
         for k in range(self.reset_candidates):
             if k == 0:
                 candidate = position
@@ -713,13 +709,57 @@ class OnlineLoop:
                 radius = speed.dteb_radius * math.sqrt(self._rng.random())
                 angle = math.tau * self._rng.random()
                 candidate = (position[0] + radius * math.cos(angle), position[1] + radius * math.sin(angle))
-            if clearance(self._obstacles, candidate) <= speed.steb_radius:
-                continue
-            tried += 1
-            reply = self._tick(tracker, candidate, d_obs, speed.beta)
-            if reply.in_teb:
-                return candidate, reply, tried
-        raise NoResetPoint(speed.dteb_radius, tried)
+            if clearance(self._obstacles, candidate) > speed.steb_radius:
+                free.append(candidate)
+        if not free:
+            return None, 0
+        states = np.array([self._relative_state(tracker, p) for p in free])
+        params = np.full((len(free), self._n_params), speed.beta)
+        answer = self.client.tracking_control(self.model, states, params, out_of_domain="flag", version=self.version)
+        inside = [p for p, member in zip(free, answer.in_teb) if member]
+        return (inside[0] if inside else None), 1
+
+    def _hold(
+        self,
+        tracker: list[float],
+        d_obs: float | None,
+        beta_old: float,
+        speed: PlannerSpeed,
+        replanned: bool,
+        round_trips: int,
+    ) -> StepReport:
+        """The hold branch: the planner waits at its state, and ``u*`` is read under ``beta_old`` (the row
+        answering for it in the current table), whose bound stays in force."""
+        index = row_for(self._speeds, beta_old)
+        if index is None:
+            raise TableMismatch(local=beta_old, server=self._speeds[-1].beta)
+        row = self._speeds[index]
+        r = self._relative_state(tracker, self._planner_state)
+        answer = self.client.tracking_control(
+            self.model, np.array([r]), np.full((1, self._n_params), row.beta), out_of_domain="flag", version=self.version
+        )
+        self._beta_query = row.beta
+        return StepReport(
+            d_obs=d_obs,
+            beta_old=beta_old,
+            beta_query=row.beta,
+            dteb_radius=row.level,
+            steb_radius=speed.steb_radius,
+            replanned=replanned,
+            branch="hold",
+            planner=np.array(self._planner_state, dtype=np.float64),
+            control=answer.controls[0],
+            relative_state=np.array(r, dtype=np.float64),
+            value=float(answer.values[0]),
+            in_teb=bool(answer.in_teb[0]),
+            in_domain=bool(answer.in_domain[0]),
+            round_trips=round_trips + 1,
+        )
+
+    def _relative_state(self, tracker: list[float], p: Point) -> list[float]:
+        """``r = s - Q p``."""
+        q = self._q
+        return [tracker[i] - q[2 * i] * p[0] - q[2 * i + 1] * p[1] for i in range(self._n_state)]
 
     def _tick(self, tracker: list[float], p: Point, d_obs: float | None, beta: float) -> TrackReply:
         """One tick with planner state ``p``; checks the server's ``beta_query`` against ``beta``."""
@@ -747,7 +787,6 @@ __all__ = [
     "GridAStar",
     "LoopSetupError",
     "NoPath",
-    "NoResetPoint",
     "OnlineLoop",
     "OnlineLoopError",
     "PlanError",
