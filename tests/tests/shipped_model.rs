@@ -1,4 +1,4 @@
-//! The shipped trained model `models/dubins4d/3`, served by the real server: it loads (checksum, schema,
+//! The shipped trained model `models/dubins4d/4`, served by the real server: it loads (checksum, schema,
 //! graph), says it is trained and verified, serves its table as written, its values keep the property every
 //! value function has, `V >= l` (the error can only be at least the current one), on random states, and its
 //! served control never pushes the speed past the tracker's limits.
@@ -15,7 +15,7 @@ const BELOW_L_TOLERANCE: f64 = 0.1;
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_shipped_dubins4d_model_is_trained_verified_and_served() {
     let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
-    let (evaluator, manifest) = evaluator_for(&repo.join("dubins4d/3"));
+    let (evaluator, manifest) = evaluator_for(&repo.join("dubins4d/4"));
     assert!(!manifest.untrained);
     assert_eq!(manifest.network.periodic_encoding, PeriodicEncoding::Circle);
     assert_eq!(manifest.state[3].limits, Some([0.1, 2.9]), "the speed limits");

@@ -116,7 +116,7 @@ enum Command {
     /// Draws a bundle's TEB table (served level, measured `V_min`) against `beta`, with grid solutions'
     /// `V_min` beside it.
     PlotTeb {
-        /// The bundle's version folder, e.g. `models/dubins4d/3`.
+        /// The bundle's version folder, e.g. `models/dubins4d/4`.
         #[arg(long)]
         bundle: PathBuf,
         /// Grid solution files (`.ftgrid`) whose `V_min` is drawn as the reference.

@@ -11,7 +11,7 @@ import numpy as np
 import pytest
 
 import fastrack
-from conftest import MODEL, Server, binary
+from conftest import MODEL, VERSION, Server, binary
 
 STATES = np.array(
     [
@@ -43,14 +43,14 @@ def test_health_and_wait_until_serving(client: fastrack.Client) -> None:
 
 def test_list_models(client: fastrack.Client) -> None:
     models = {(m.name, m.version): m for m in client.list_models()}
-    assert ("dubins4d", 3) in models and ("untrained-dubins4d", 1) in models
-    assert models[("dubins4d", 3)].is_default_version
-    assert not models[("dubins4d", 3)].untrained and models[("untrained-dubins4d", 1)].untrained
+    assert ("dubins4d", VERSION) in models and ("untrained-dubins4d", 1) in models
+    assert models[("dubins4d", VERSION)].is_default_version
+    assert not models[("dubins4d", VERSION)].untrained and models[("untrained-dubins4d", 1)].untrained
 
 
 def test_get_model_describes_dimensions_and_units(client: fastrack.Client) -> None:
     info = client.get_model(MODEL)
-    assert info.version == 3 and info.system == "dubins4d"
+    assert info.version == VERSION and info.system == "dubins4d"
     assert [(d.name, d.unit) for d in info.state] == [("x_r", "m"), ("y_r", "m"), ("theta", "rad"), ("v", "m/s")]
     assert [c.name for c in info.controls] == ["omega", "alpha"]
     assert info.planner_dim == 2 and len(info.teb_table) >= 16
@@ -65,9 +65,9 @@ def test_query_planner_control_matches_the_rust_cli(client: fastrack.Client, ser
         assert answer.beta_query == rust["beta_query"]
         assert answer.dteb_radius == rust["dteb_radius"] and answer.steb_radius == rust["steb_radius"]
         assert answer.steb_exceeds_half_distance == rust["steb_exceeds_half_distance"]
-        assert answer.model_version == 3
+        assert answer.model_version == VERSION
     # The documented answers of the shipped table.
-    assert client.query_planner_control(MODEL, d_obs=2.5).beta_query == pytest.approx(0.65)
+    assert client.query_planner_control(MODEL, d_obs=2.5).beta_query == pytest.approx(0.8)
     slow = client.query_planner_control(MODEL, d_obs=0.8)
     assert slow.beta_query == pytest.approx(0.5) and slow.steb_exceeds_half_distance
     assert client.query_planner_control(MODEL).beta_query == pytest.approx(1.25)
@@ -94,7 +94,7 @@ def test_evaluate_matches_the_rust_cli(client: fastrack.Client, server: Server) 
     np.testing.assert_allclose(result.gradients.ravel(), rust["gradients"], rtol=1e-9, atol=0)
     np.testing.assert_allclose(result.controls.ravel(), rust["controls"], rtol=1e-9, atol=0)
     assert result.in_teb.tolist() == rust["in_teb"] and result.in_domain.tolist() == rust["in_domain"]
-    assert result.model_version == rust["model_version"] == 3
+    assert result.model_version == rust["model_version"] == VERSION
     # V never lies below the tracking error |e| by more than the shipped model's documented dip.
     assert np.all(result.values >= np.hypot(STATES[:, 0], STATES[:, 1]) - 0.02)
 
@@ -127,6 +127,6 @@ def test_a_batch_of_64_and_a_version_pin(client: fastrack.Client) -> None:
     states = np.column_stack(
         [rng.uniform(-1, 1, 64), rng.uniform(-1, 1, 64), rng.uniform(-3, 3, 64), rng.uniform(0.5, 2.5, 64)]
     )
-    result = client.tracking_control(MODEL, states, rng.uniform(0.5, 1.25, (64, 1)), version=3)
-    assert result.controls.shape == (64, 2) and result.model_version == 3
+    result = client.tracking_control(MODEL, states, rng.uniform(0.5, 1.25, (64, 1)), version=VERSION)
+    assert result.controls.shape == (64, 2) and result.model_version == VERSION
     assert result.in_domain.all()

@@ -10,7 +10,7 @@ import numpy as np
 import pytest
 
 import fastrack
-from conftest import ADMIN_TOKEN, MODEL, USER_TOKEN, Server
+from conftest import ADMIN_TOKEN, MODEL, USER_TOKEN, VERSION, Server
 from fastrack.errors import from_rpc_error
 from fastrack.v1 import models_pb2, safety_pb2, safety_pb2_grpc
 
@@ -27,7 +27,7 @@ def test_nan_in_states_is_refused_by_the_server(client: fastrack.Client) -> None
 def test_wrong_shapes_are_refused_before_sending(client: fastrack.Client) -> None:
     with pytest.raises(fastrack.InvalidArgument) as states:
         client.evaluate(MODEL, [[0.1, 0.2, 0.3]], 1.0)
-    assert states.value.message.startswith("states has shape [1, 3]; model dubins4d/3 needs [N, n_state] = [N, 4]")
+    assert states.value.message.startswith("states has shape [1, 3]; model dubins4d/4 needs [N, n_state] = [N, 4]")
     with pytest.raises(fastrack.InvalidArgument, match=r"states has shape \[4\]"):
         client.tracking_control(MODEL, [0.1, 0.2, 0.3, 1.0], 1.0)
     with pytest.raises(fastrack.InvalidArgument, match=r"params has shape \[2, 2\]; .* needs \[N, n_params\] = \[1, 1\]"):
@@ -136,7 +136,7 @@ def test_no_or_unknown_token_is_unauthenticated(authed: dict[str, fastrack.Clien
 
 def test_user_token_on_an_admin_call_is_permission_denied(authed: dict[str, fastrack.Client]) -> None:
     user = authed["user"]
-    assert user.query_planner_control(MODEL, 2.5).beta_query == pytest.approx(0.65)
+    assert user.query_planner_control(MODEL, 2.5).beta_query == pytest.approx(0.8)
     with user.track(MODEL) as robot:  # streams carry the token too
         assert robot.tick([0.0, 0.0, 0.0, 1.0], [0.0, 0.0]).seq == 0
     with pytest.raises(fastrack.PermissionDenied) as denied:
@@ -144,8 +144,8 @@ def test_user_token_on_an_admin_call_is_permission_denied(authed: dict[str, fast
     assert denied.value.message == "this service needs an admin token; the token given is a user token"
     admin = authed["admin"]
     outcomes = admin.reload_model(MODEL)
-    assert [(o.name, o.version, o.loaded) for o in outcomes] == [(MODEL, 3, True)]
-    assert admin.load_model(MODEL, 3) == [3]
+    assert [(o.name, o.version, o.loaded) for o in outcomes] == [(MODEL, VERSION, True)]
+    assert admin.load_model(MODEL, VERSION) == [VERSION]
     with pytest.raises(fastrack.NotFound, match="the repository has no folder dubins4d/9"):
         admin.load_model(MODEL, 9)
 
@@ -159,7 +159,7 @@ async def test_async_client_sends_the_token(auth_server: Server) -> None:
         async with user.track(MODEL) as robot:
             assert (await robot.tick([0.0, 0.0, 0.0, 1.0], [0.0, 0.0])).seq == 0
         with pytest.raises(fastrack.PermissionDenied):
-            await user.unload_model(MODEL, 3)
+            await user.unload_model(MODEL, VERSION)
 
 
 async def test_a_full_queue_is_resource_exhausted() -> None:

@@ -54,7 +54,7 @@ def test_ros_free_tracking_controller(client: fastrack.Client) -> None:
         controller.on_planner_state([0.1, -0.2])
         controller.on_obstacle_distance(2.5)
         step = controller.on_tracker_state([0.3, -0.5, 1.0, 1.5])
-        assert step is not None and step.beta_query == pytest.approx(0.65)
+        assert step is not None and step.beta_query == pytest.approx(0.8)
         expected = client.tracking_control(MODEL, [[0.2, -0.3, 1.0, 1.5]], step.beta_query).controls[0]
         np.testing.assert_allclose(step.control, expected, rtol=1e-9, atol=0)
         controller.on_obstacle_distance(-1.0)  # none sensed: the fastest speed
@@ -94,7 +94,7 @@ def test_ros2_node_publishes_the_served_control(server: Server, client: fastrack
             for _ in range(5):
                 executor.spin_once(timeout_sec=0.02)
         assert controls, "the node published no control"
-        expected = client.tracking_control(MODEL, [[0.2, -0.3, 1.0, 1.5]], 0.65).controls[0]
+        expected = client.tracking_control(MODEL, [[0.2, -0.3, 1.0, 1.5]], 0.8).controls[0]
         np.testing.assert_allclose(controls[0], expected, rtol=1e-9, atol=0)
         assert bounds and bounds[0] == pytest.approx(client.query_planner_control(MODEL, 2.5).dteb_radius)
         executor.shutdown()

@@ -288,4 +288,4 @@ def test_addresses_are_checked_and_names_resolved(server: Server) -> None:
     with fastrack.Client(f"localhost:{port}") as named:  # every address localhost has is a replica
         assert named.endpoints and all(e.endswith(f":{port}") for e in named.endpoints), named.endpoints
         assert f"127.0.0.1:{port}" in named.endpoints
-        assert named.query_planner_control(MODEL, 2.5).beta_query == pytest.approx(0.65)
+        assert named.query_planner_control(MODEL, 2.5).beta_query == pytest.approx(0.8)

@@ -14,7 +14,7 @@ use std::path::PathBuf;
 /// Arguments of `compare`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// The bundle's version folder, e.g. `models/dubins4d/3`.
+    /// The bundle's version folder, e.g. `models/dubins4d/4`.
     #[arg(long)]
     bundle: PathBuf,
     #[command(flatten)]

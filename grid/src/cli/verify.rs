@@ -26,7 +26,7 @@ const PART_STEM: &str = "grid-verify";
 /// Arguments of `verify`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// The bundle's version folder, e.g. `models/dubins4d/3`.
+    /// The bundle's version folder, e.g. `models/dubins4d/4`.
     #[arg(long)]
     bundle: PathBuf,
     /// Repository root the verified bundle is written into (`<out>/<name>/<version>/`); may be the
@@ -143,7 +143,7 @@ pub struct Args {
 /// Arguments of `verify-merge`.
 #[derive(clap::Args)]
 pub struct MergeArgs {
-    /// The bundle's version folder the shards verified, e.g. `models/dubins4d/3`.
+    /// The bundle's version folder the shards verified, e.g. `models/dubins4d/4`.
     #[arg(long)]
     bundle: PathBuf,
     /// Repository root the verified bundle is written into (`<out>/<name>/<version>/`).
