@@ -326,9 +326,10 @@ impl OnlineLoop {
             .unwrap_or((0, self.planner))
     }
 
-    /// A free planner state with `s - Q p` inside `dTEBmax`, if there is one among the candidates: the
-    /// tracker's own position first, then points drawn uniformly in the disc of radius `dTEBmax` around it,
-    /// the free ones asked about in one `TrackingControl` batch. Also returns the calls made.
+    /// A free planner state with `s - Q p` inside `dTEBmax` and the trained domain, if there is one among the
+    /// candidates: the tracker's own position first, then points drawn uniformly in the disc of radius
+    /// `dTEBmax` around it, the free ones asked about in one `TrackingControl` batch. Also returns the calls
+    /// made.
     async fn reset_point(
         &mut self,
         tracker: &[f64],
@@ -356,7 +357,9 @@ impl OnlineLoop {
         let states = free.iter().flat_map(|&p| self.relative_state(tracker, p)).collect();
         let params = vec![speed.beta; free.len() * self.n_params];
         let reply = self.client.tracking_control(self.settings.model.clone(), states, params, FLAG).await?;
-        let inside = free.into_iter().zip(reply.in_teb).find_map(|(p, inside)| inside.then_some(p));
+        // Inside the bound and the trained domain: a membership read off an extrapolated value is no reset.
+        let members = reply.in_teb.iter().zip(&reply.in_domain).map(|(&teb, &domain)| teb && domain);
+        let inside = free.into_iter().zip(members).find_map(|(p, inside)| inside.then_some(p));
         Ok((inside, 1))
     }
 
@@ -371,10 +374,11 @@ impl OnlineLoop {
         replanned: bool,
         round_trips: usize,
     ) -> Result<StepReport, LoopError> {
-        let server_beta_u = self.speeds.last().map_or(f64::NAN, |row| row.beta);
+        // Only a table fetched again after a reload can end below `beta_old`.
+        let fetched_beta_u = self.speeds.last().map_or(f64::NAN, |row| row.beta);
         let row = row_for(&self.speeds, beta_old)
             .map(|i| self.speeds[i])
-            .ok_or(LoopError::TableMismatch { local: beta_old, server: server_beta_u })?;
+            .ok_or(LoopError::TableMismatch { local: beta_old, server: fetched_beta_u })?;
         let relative_state = self.relative_state(tracker, self.planner);
         let params = vec![row.beta; self.n_params];
         let reply =

@@ -22,8 +22,8 @@ Each :meth:`OnlineLoop.step` takes the tracker state and the obstacles sensed no
 The tick that carries ``p_next`` (or the candidate ``p*``) returns ``beta_query``, the bound's membership
 and ``u*`` together, so the common branch costs one round trip; a reset asks about all its candidates in
 one ``TrackingControl`` batch and then ticks the chosen one; a hold reads its control with one more
-``TrackingControl`` call under ``beta_old``. The server's ``beta_query`` is checked against the local one: a table that changed under
-the loop (the model was reloaded) is fetched again and the step taken again, once.
+``TrackingControl`` call under ``beta_old``. The server's ``beta_query`` is checked against the local one: a
+table that changed under the loop (the model was reloaded) is fetched again and the step taken again, once.
 
 >>> import fastrack
 >>> from fastrack.geometry import Circle
@@ -698,9 +698,10 @@ class OnlineLoop:
         return best
 
     def _reset_point(self, tracker: list[float], position: Point, speed: PlannerSpeed) -> tuple[Point | None, int]:
-        """A free planner state with ``s - Q p`` inside ``dTEBmax``, if there is one among the candidates: the
-        tracker's own position first, then points drawn uniformly in the disc of radius ``dTEBmax`` around
-        it, the free ones asked about in one ``TrackingControl`` batch. Also returns the calls made."""
+        """A free planner state with ``s - Q p`` inside ``dTEBmax`` and the trained domain, if there is one
+        among the candidates: the tracker's own position first, then points drawn uniformly in the disc of
+        radius ``dTEBmax`` around it, the free ones asked about in one ``TrackingControl`` batch. Also returns
+        the calls made."""
         free: list[Point] = []
         for k in range(self.reset_candidates):
             if k == 0:
@@ -716,7 +717,8 @@ class OnlineLoop:
         states = np.array([self._relative_state(tracker, p) for p in free])
         params = np.full((len(free), self._n_params), speed.beta)
         answer = self.client.tracking_control(self.model, states, params, out_of_domain="flag", version=self.version)
-        inside = [p for p, member in zip(free, answer.in_teb) if member]
+        # Inside the bound and the trained domain: a membership read off an extrapolated value is no reset.
+        inside = [p for p, teb, domain in zip(free, answer.in_teb, answer.in_domain) if teb and domain]
         return (inside[0] if inside else None), 1
 
     def _hold(
@@ -735,9 +737,8 @@ class OnlineLoop:
             raise TableMismatch(local=beta_old, server=self._speeds[-1].beta)
         row = self._speeds[index]
         r = self._relative_state(tracker, self._planner_state)
-        answer = self.client.tracking_control(
-            self.model, np.array([r]), np.full((1, self._n_params), row.beta), out_of_domain="flag", version=self.version
-        )
+        params = np.full((1, self._n_params), row.beta)
+        answer = self.client.tracking_control(self.model, [r], params, out_of_domain="flag", version=self.version)
         self._beta_query = row.beta
         return StepReport(
             d_obs=d_obs,
