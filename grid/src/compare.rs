@@ -1,10 +1,13 @@
 //! A model bundle against a grid solution at one `beta`: learned vs grid `V_min`, their ratio, the error of
 //! `V` over the grid's sublevel set, how the served control compares with the grid's optimal control there,
-//! and the `(axis 0, axis 1)` slices of both value functions through the grid's minimiser.
+//! and the `(axis 0, axis 1)` slices of both value functions through the grid's minimiser. A bundle of a
+//! decomposed system (quad10d) is compared axis by axis with the combined ground truth of its axes' solutions
+//! ([`combined_on_axis`], [`learned_on_axis`]).
 
+use crate::grid::Grid;
 use crate::solver::Solution;
 use fastrack_valuefn::runtime::{Evaluator, RuntimeError};
-use fastrack_valuefn::system::AffineSystem;
+use fastrack_valuefn::system::{AffineSystem, DecomposedAxis};
 use serde::{Deserialize, Serialize};
 
 /// Grid nodes evaluated per ONNX batch.
@@ -70,18 +73,26 @@ pub struct Learned {
 /// `params` (its own parameters: one shared `beta` for a diagonal-mode bundle, `beta` per planner input
 /// otherwise).
 pub fn learned_on_grid(evaluator: &Evaluator, solution: &Solution, params: &[f64]) -> Result<Learned, RuntimeError> {
-    let grid = &solution.grid;
-    let n = grid.ndim();
+    learned_at_nodes(evaluator, &solution.grid, params, |r, state| state.extend(r.iter().map(|&x| x as f32)))
+}
+
+/// The bundle at every node of `grid`, each node written into the bundle's state by `embed`.
+fn learned_at_nodes(
+    evaluator: &Evaluator,
+    grid: &Grid,
+    params: &[f64],
+    embed: impl Fn(&[f64], &mut Vec<f32>),
+) -> Result<Learned, RuntimeError> {
     let params: Vec<f32> = params.iter().map(|&p| p as f32).collect();
     let mut values = Vec::with_capacity(grid.num_points());
     let mut controls = Vec::new();
-    let mut r = vec![0.0; n];
+    let mut r = vec![0.0; grid.ndim()];
     for start in (0..grid.num_points()).step_by(BATCH) {
         let end = (start + BATCH).min(grid.num_points());
-        let mut states = Vec::with_capacity((end - start) * n);
+        let mut states = Vec::new();
         for flat in start..end {
             grid.point(flat, &mut r);
-            states.extend(r.iter().map(|&x| x as f32));
+            embed(&r, &mut states);
         }
         let batch_params: Vec<f32> = params.iter().copied().cycle().take((end - start) * params.len()).collect();
         let out = evaluator.evaluate(&states, &batch_params)?;
@@ -89,6 +100,69 @@ pub fn learned_on_grid(evaluator: &Evaluator, solution: &Solution, params: &[f64
         controls.extend(out.control.iter().map(|&u| f64::from(u)));
     }
     Ok(Learned { values, controls })
+}
+
+/// The combined ground truth of a decomposed system along one of its axes: `V_c(r) = sqrt(sum_b V_b(r_b)^2)`
+/// (the bound the axes' solutions certify together) on the nodes of that axis' grid, every other axis held
+/// at its own solution's minimiser.
+#[derive(Debug, Clone, PartialEq)]
+pub struct AxisSlice {
+    /// The axis' grid with the values `sqrt(V_a^2 + sum_{b != a} V_min,b^2)`: its minimum is the combined
+    /// bound `sqrt(sum_b V_min,b^2)`, and its sublevel sets are the axis' own.
+    pub reference: Solution,
+    /// The full relative state the axis' nodes are written into.
+    pub base: Vec<f64>,
+    /// The axis' coordinates in the full state.
+    pub coords: Vec<usize>,
+    /// The full system's controls acting on the axis, in the subsystem's order.
+    pub controls: Vec<usize>,
+}
+
+/// The node of `solution` where `V` is least, as a point.
+fn minimiser(solution: &Solution) -> Vec<f64> {
+    let best = solution.values.iter().enumerate().fold(0, |b, (i, &v)| if v < solution.values[b] { i } else { b });
+    let mut point = vec![0.0; solution.grid.ndim()];
+    solution.grid.point(best, &mut point);
+    point
+}
+
+/// The combined ground truth along axis `k` of `axes` (a decomposition of `system`, each axis with its
+/// subsystem's solution at one `beta`).
+pub fn combined_on_axis(system: &AffineSystem, axes: &[(DecomposedAxis, &Solution)], k: usize) -> AxisSlice {
+    let mut base = vec![0.0; system.n_state()];
+    let mut others = 0.0;
+    for (b, (axis, solution)) in axes.iter().enumerate() {
+        for (&i, x) in axis.coords.iter().zip(minimiser(solution)) {
+            base[i] = x;
+        }
+        if b != k {
+            let v_min = solution.values.iter().copied().fold(f64::INFINITY, f64::min);
+            others += v_min.max(0.0).powi(2);
+        }
+    }
+    let (axis, solution) = &axes[k];
+    let mut reference = (*solution).clone();
+    for v in &mut reference.values {
+        *v = (v.max(0.0).powi(2) + others).sqrt();
+    }
+    let controls =
+        (0..system.n_control()).filter(|&j| axis.coords.iter().any(|&i| system.g_control[(i, j)] != 0.0)).collect();
+    AxisSlice { reference, base, coords: axis.coords.clone(), controls }
+}
+
+/// The bundle of the full system at every node of `slice`'s axis grid, written into its base state: the
+/// values, and the served controls of the axis' own inputs.
+pub fn learned_on_axis(evaluator: &Evaluator, slice: &AxisSlice, params: &[f64]) -> Result<Learned, RuntimeError> {
+    let full = learned_at_nodes(evaluator, &slice.reference.grid, params, |r, state| {
+        let start = state.len();
+        state.extend(slice.base.iter().map(|&x| x as f32));
+        for (&i, &x) in slice.coords.iter().zip(r) {
+            state[start + i] = x as f32;
+        }
+    })?;
+    let n_control = full.controls.len() / full.values.len().max(1);
+    let controls = full.controls.chunks(n_control.max(1)).flat_map(|u| slice.controls.iter().map(|&j| u[j])).collect();
+    Ok(Learned { values: full.values, controls })
 }
 
 /// Compares `learned` (at the grid's nodes) with `solution` of `system` over `{V_grid <= factor V_min}`.

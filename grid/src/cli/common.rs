@@ -1,12 +1,14 @@
 //! Options shared by the subcommands: the system, its grid and the solver settings.
 
 use anyhow::{bail, Context};
+use fastrack_grid::format::load;
 use fastrack_grid::grid::{Axis, Grid};
 use fastrack_grid::integrate::RkOrder;
 use fastrack_grid::scheme::Flux;
+use fastrack_grid::solver::Solution;
 use fastrack_grid::solver::{ConvergenceSet, SolverConfig};
 use fastrack_grid::upwind::Accuracy;
-use fastrack_valuefn::system::{by_id, AffineSystem, SYSTEM_IDS};
+use fastrack_valuefn::system::{by_id, AffineSystem, DecomposedAxis, SYSTEM_IDS};
 use std::path::PathBuf;
 
 /// Where solutions are cached and measurement records written.
@@ -148,4 +150,55 @@ pub fn params_for(system: &AffineSystem, beta: f64) -> anyhow::Result<Vec<f64>> 
 /// The command line as run, for records (`fastrack-grid <arguments>`, whatever the binary's path).
 pub fn command_line() -> String {
     std::iter::once("fastrack-grid".to_string()).chain(std::env::args().skip(1)).collect::<Vec<_>>().join(" ")
+}
+
+/// Solution files with their paths.
+pub type LoadedSolutions = Vec<(PathBuf, Solution)>;
+
+/// Loads the solution files of a decomposed system's axes (`id`, decomposed into `axes`), each checked to
+/// solve one of its axis subsystems, and the `beta`s they were solved at, in order.
+pub fn load_axis_solutions(
+    id: &str,
+    axes: &[DecomposedAxis],
+    paths: &[PathBuf],
+) -> anyhow::Result<(LoadedSolutions, Vec<f64>)> {
+    let mut solutions = Vec::new();
+    for path in paths {
+        let solution = load(path).with_context(|| format!("loading {}", path.display()))?;
+        if !axes.iter().any(|a| a.subsystem == solution.info.system) {
+            bail!("{}: system `{}` is not an axis of {id}", path.display(), solution.info.system);
+        }
+        solutions.push((path.clone(), solution));
+    }
+    let mut betas: Vec<f64> = solutions.iter().map(|(_, s)| s.info.params[0]).collect();
+    betas.sort_by(f64::total_cmp);
+    betas.dedup();
+    Ok((solutions, betas))
+}
+
+/// The axis solutions of one `beta`, in the decomposition's order.
+pub fn axes_at(
+    id: &str,
+    axes: &[DecomposedAxis],
+    solutions: &[(PathBuf, Solution)],
+    beta: f64,
+) -> anyhow::Result<Vec<(DecomposedAxis, Solution)>> {
+    axes.iter()
+        .map(|axis| {
+            let mut found =
+                solutions.iter().filter(|(_, s)| s.info.system == axis.subsystem && s.info.params[0] == beta);
+            let (path, solution) = found
+                .next()
+                .with_context(|| format!("{id} at beta {beta}: no solution of its axis `{}`", axis.subsystem))?;
+            if let Some((other, _)) = found.next() {
+                bail!(
+                    "{id} at beta {beta}: two solutions of `{}` ({} and {}); give one per beta",
+                    axis.subsystem,
+                    path.display(),
+                    other.display()
+                );
+            }
+            Ok((axis.clone(), solution.clone()))
+        })
+        .collect()
 }

@@ -2,7 +2,7 @@
 //! solution's `V_min`; a table, a plot against `beta` and a record. With `--system` naming a decomposed
 //! system, the solutions are its axes' and are rolled out side by side in the full system, per `beta`.
 
-use super::common::command_line;
+use super::common::{axes_at, command_line, load_axis_solutions};
 use anyhow::Context;
 use fastrack_grid::format::load;
 use fastrack_grid::rollout::{roll_out_axes, roll_out_solution, AxesRolloutReport, RolloutOptions, RolloutReport};
@@ -192,48 +192,11 @@ fn write_outputs(
     Ok(())
 }
 
-/// The axis solutions of one `beta`, in the decomposition's order.
-fn axes_at(
-    id: &str,
-    axes: &[DecomposedAxis],
-    solutions: &[(PathBuf, Solution)],
-    beta: f64,
-) -> anyhow::Result<Vec<(DecomposedAxis, Solution)>> {
-    axes.iter()
-        .map(|axis| {
-            let mut found =
-                solutions.iter().filter(|(_, s)| s.info.system == axis.subsystem && s.info.params[0] == beta);
-            let (path, solution) = found
-                .next()
-                .with_context(|| format!("{id} at beta {beta}: no solution of its axis `{}`", axis.subsystem))?;
-            if let Some((other, _)) = found.next() {
-                anyhow::bail!(
-                    "{id} at beta {beta}: two solutions of `{}` ({} and {}); give one per beta",
-                    axis.subsystem,
-                    path.display(),
-                    other.display()
-                );
-            }
-            Ok((axis.clone(), solution.clone()))
-        })
-        .collect()
-}
-
 /// `rollout --system`: the axes of a decomposed system side by side, per `beta`.
 fn run_axes(args: &Args, options: &RolloutOptions, id: &str) -> anyhow::Result<()> {
     let system = by_id(id).with_context(|| format!("unknown system `{id}`"))?;
     let axes = decomposition(id).with_context(|| format!("`{id}` has no decomposition into axes"))?;
-    let mut solutions = Vec::new();
-    for path in &args.solutions {
-        let solution = load(path).with_context(|| format!("loading {}", path.display()))?;
-        if !axes.iter().any(|a| a.subsystem == solution.info.system) {
-            anyhow::bail!("{}: system `{}` is not an axis of {id}", path.display(), solution.info.system);
-        }
-        solutions.push((path.clone(), solution));
-    }
-    let mut betas: Vec<f64> = solutions.iter().map(|(_, s)| s.info.params[0]).collect();
-    betas.sort_by(f64::total_cmp);
-    betas.dedup();
+    let (solutions, betas) = load_axis_solutions(id, &axes, &args.solutions)?;
     let mut table = Table::new(&[
         "beta",
         "axis V_min",
