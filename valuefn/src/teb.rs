@@ -228,10 +228,13 @@ pub fn teb_table(oracle: &dyn ValueOracle, system: &AffineSystem, options: &TebO
             beta_l + (beta_u - beta_l) * i as f64 / (options.rows - 1) as f64
         };
         let params = vec![beta; system.n_params()];
-        let (measured_min, _) = minimise(oracle, system, &params, options, &mut rng)?;
+        let (measured_min, argmin) = minimise(oracle, system, &params, options, &mut rng)?;
         if measured_min.is_nan() || measured_min <= 0.0 {
+            let at: Vec<String> =
+                system.state.iter().zip(&argmin).map(|(d, x)| format!("{} = {x:.3}", d.name)).collect();
             return Err(format!(
-                "V_min = {measured_min} at beta = {beta}: a tracking value function satisfies V >= l(r) >= 0 and has a positive minimum; this one is wrong there"
+                "V_min = {measured_min} at beta = {beta} ({}): a tracking value function satisfies V >= l(r) >= 0 and has a positive minimum; this one is wrong there",
+                at.join(", ")
             ));
         }
         if measured_min < running_max {
