@@ -118,11 +118,15 @@ pub struct AxisSlice {
     pub controls: Vec<usize>,
 }
 
+/// The index of the node of `solution` where `V` is least.
+fn argmin_node(solution: &Solution) -> usize {
+    solution.values.iter().enumerate().fold(0, |b, (i, &v)| if v < solution.values[b] { i } else { b })
+}
+
 /// The node of `solution` where `V` is least, as a point.
 fn minimiser(solution: &Solution) -> Vec<f64> {
-    let best = solution.values.iter().enumerate().fold(0, |b, (i, &v)| if v < solution.values[b] { i } else { b });
     let mut point = vec![0.0; solution.grid.ndim()];
-    solution.grid.point(best, &mut point);
+    solution.grid.point(argmin_node(solution), &mut point);
     point
 }
 
@@ -214,7 +218,7 @@ pub fn compare(system: &AffineSystem, solution: &Solution, learned: &Learned, su
 /// The plane of axes 0 and 1 through the grid's minimiser, for both value functions.
 pub fn slices(solution: &Solution, learned: &[f64]) -> Slices {
     let grid = &solution.grid;
-    let best = solution.values.iter().enumerate().fold(0, |b, (i, &v)| if v < solution.values[b] { i } else { b });
+    let best = argmin_node(solution);
     let base: usize = (2..grid.ndim()).map(|k| grid.node(best, k) * grid.strides()[k]).sum();
     let (n0, n1) = (grid.axes()[0].n, grid.axes()[1].n);
     let (s0, s1) = (grid.strides()[0], grid.strides()[1]);
