@@ -177,12 +177,12 @@ pub fn load_axis_solutions(
 }
 
 /// The axis solutions of one `beta`, in the decomposition's order.
-pub fn axes_at(
+pub fn axes_at<'a>(
     id: &str,
     axes: &[DecomposedAxis],
-    solutions: &[(PathBuf, Solution)],
+    solutions: &'a [(PathBuf, Solution)],
     beta: f64,
-) -> anyhow::Result<Vec<(DecomposedAxis, Solution)>> {
+) -> anyhow::Result<Vec<(DecomposedAxis, &'a Solution)>> {
     axes.iter()
         .map(|axis| {
             let mut found =
@@ -198,7 +198,7 @@ pub fn axes_at(
                     other.display()
                 );
             }
-            Ok((axis.clone(), solution.clone()))
+            Ok((axis.clone(), solution))
         })
         .collect()
 }

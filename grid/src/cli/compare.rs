@@ -11,6 +11,7 @@ use fastrack_grid::compare::{
 use fastrack_grid::slice_plot::slice_pair;
 use fastrack_grid::solver::Solution;
 use fastrack_valuefn::bundle::Bundle;
+use fastrack_valuefn::manifest::Manifest;
 use fastrack_valuefn::record::{write_record, Table};
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
 use fastrack_valuefn::system::{by_id, decomposition, AffineSystem, DecomposedAxis};
@@ -57,6 +58,11 @@ const COLUMNS: [&str; 10] = [
     "set nodes",
     "slice",
 ];
+
+/// The level the bundle serves at `beta`: its first row at or above it.
+fn served_level(manifest: &Manifest, beta: f64) -> Option<f64> {
+    manifest.teb_table.iter().find(|r| r.beta >= beta - 1e-9).map(|r| r.served_level())
+}
 
 /// A table row's cells after `beta`.
 fn cells(system: &AffineSystem, c: &Comparison, level: Option<f64>, png: &Path) -> Vec<String> {
@@ -133,7 +139,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let png = args.outputs.results_dir.join(format!("{name}-beta{beta}.png"));
         let title = format!("{} beta {beta}", manifest.name);
         let (c, s) = compare_and_draw(&system, &solution, &learned, args.sublevel_factor, &png, &title)?;
-        let level = manifest.teb_table.iter().find(|r| r.beta >= beta - 1e-9).map(|r| r.served_level());
+        let level = served_level(manifest, beta);
         table.row([vec![beta.to_string()], cells(&system, &c, level, &png)].concat());
         rows.push(
             json!({ "comparison": c, "table_level": level, "slice_cut": s.cut, "plot": png.display().to_string(),
@@ -174,9 +180,8 @@ fn run_axes(
     let mut table = Table::new(&[&["beta", "axis"][..], &COLUMNS].concat());
     let mut rows = Vec::new();
     for beta in betas {
-        let picked = axes_at(id, axes, &solutions, beta)?;
-        let pairs: Vec<(DecomposedAxis, &Solution)> = picked.iter().map(|(a, s)| (a.clone(), s)).collect();
-        let level = manifest.teb_table.iter().find(|r| r.beta >= beta - 1e-9).map(|r| r.served_level());
+        let pairs = axes_at(id, axes, &solutions, beta)?;
+        let level = served_level(manifest, beta);
         for (k, (axis, _)) in pairs.iter().enumerate() {
             let slice = combined_on_axis(&system, &pairs, k);
             let subsystem = by_id(axis.subsystem).with_context(|| format!("unknown system `{}`", axis.subsystem))?;

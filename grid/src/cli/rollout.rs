@@ -9,7 +9,7 @@ use fastrack_grid::rollout::{roll_out_axes, roll_out_solution, AxesRolloutReport
 use fastrack_grid::solver::Solution;
 use fastrack_valuefn::plot::{line_chart, Chart, Series};
 use fastrack_valuefn::record::{write_record, Table};
-use fastrack_valuefn::system::{by_id, decomposition, DecomposedAxis};
+use fastrack_valuefn::system::{by_id, decomposition};
 use serde_json::json;
 use std::path::PathBuf;
 
@@ -211,8 +211,7 @@ fn run_axes(args: &Args, options: &RolloutOptions, id: &str) -> anyhow::Result<(
     ]);
     let mut reports: Vec<AxesRolloutReport> = Vec::new();
     for beta in betas {
-        let picked = axes_at(id, &axes, &solutions, beta)?;
-        let pairs: Vec<(DecomposedAxis, &Solution)> = picked.iter().map(|(a, s)| (a.clone(), s)).collect();
+        let pairs = axes_at(id, &axes, &solutions, beta)?;
         let report = roll_out_axes(&system, &pairs, options)?;
         let r = &report.rollout;
         let own: Vec<String> =
