@@ -217,6 +217,11 @@ pub struct SupervisionConfig {
     /// Level factor of that set (default 2).
     #[serde(default = "default_focus_factor")]
     pub focus_factor: f64,
+    /// Share of the targets drawn at a solution's own parameters, anywhere in its grid (default 0). A target
+    /// blended between two solutions must lie in both grids, so where a grid reaches past the one at the next
+    /// lower `beta` (domains scaled to each `beta`'s error set), only these rows supervise its outer part.
+    #[serde(default)]
+    pub own_grid_share: f64,
     /// Multiplies the squared value error where the network is below the grid (default 1: symmetric). A
     /// value below the truth makes the tracking error bound too small, the unsafe side; above 1 the fit
     /// settles on the grid from above where it cannot match it exactly.
@@ -322,6 +327,7 @@ impl TrainConfig {
             ensure!(sup.points > 0, "supervision.points must be > 0");
             ensure!((0.0..=1.0).contains(&sup.focus_share), "supervision.focus_share must be in [0, 1]");
             ensure!(sup.focus_factor.is_finite() && sup.focus_factor >= 1.0, "supervision.focus_factor must be >= 1");
+            ensure!((0.0..=1.0).contains(&sup.own_grid_share), "supervision.own_grid_share must be in [0, 1]");
             ensure!(sup.under_weight.is_finite() && sup.under_weight >= 1.0, "supervision.under_weight must be >= 1");
         }
         ensure!(!self.export.name.is_empty() && self.export.version > 0, "export needs a name and a positive version");

@@ -64,6 +64,8 @@ pub struct GridSupervision {
     blend_in_beta: bool,
     points: usize,
     focus_share: f64,
+    /// Share of the rows drawn at a solution's own parameters, anywhere in its grid.
+    own_grid_share: f64,
     seed: u64,
     /// Weight of the value error.
     pub weight: f64,
@@ -166,6 +168,7 @@ impl GridSupervision {
             blend_in_beta,
             points: config.points,
             focus_share: config.focus_share,
+            own_grid_share: config.own_grid_share,
             seed,
             weight: config.weight,
             gradient_weight: config.gradient_weight,
@@ -180,8 +183,8 @@ impl GridSupervision {
     /// Each row takes a pair of solutions `(a, b)` and a blend weight `w`: with `blend_in_beta`, `beta` is
     /// drawn uniformly between the first and last solution's, `a` and `b` are the solutions on either side and
     /// the target is `(1 - w) V_a + w V_b` (`V` is nondecreasing in `beta`, since a faster planner only helps
-    /// the adversary, so the blend lies between the two); otherwise the solutions are taken in turn with
-    /// `w = 0`. The point is a node of the nearer solution (a `focus_share` of them from near its minimum),
+    /// the adversary, so the blend lies between the two); otherwise, and for the last `own_grid_share` of the
+    /// rows, the solutions are taken in turn with `w = 0`, so such a point may lie anywhere in its grid. The point is a node of the nearer solution (a `focus_share` of them from near its minimum),
     /// moved uniformly within its cell and drawn again until it also lies in the other solution's grid, and
     /// the values there are each grid's multilinear interpolation: points between the nodes keep the sine
     /// network from fitting the nodes while it oscillates between them.
@@ -191,6 +194,7 @@ impl GridSupervision {
         let n_state = self.solutions[0].solution.grid.ndim();
         let n_params = self.solutions[0].params.len();
         let n_focus = (self.focus_share * m as f64).round() as usize;
+        let first_own = m - (self.own_grid_share * m as f64).round() as usize;
         let (mut tau, mut state, mut params, mut target) = (
             Vec::with_capacity(m),
             Vec::with_capacity(m * n_state),
@@ -201,7 +205,7 @@ impl GridSupervision {
         let mut gradient_weights = Vec::with_capacity(m * n_state);
         let (mut x, mut alpha) = (vec![0.0; n_state], vec![0.0; n_state]);
         for i in 0..m {
-            let (a, b, w) = if self.blend_in_beta {
+            let (a, b, w) = if self.blend_in_beta && i < first_own {
                 let (lo, hi) = (self.solutions[0].params[0], self.solutions[self.solutions.len() - 1].params[0]);
                 let beta = rng.random_range(lo..=hi);
                 let k = self.solutions.partition_point(|s| s.params[0] <= beta).clamp(1, self.solutions.len() - 1);

@@ -72,6 +72,7 @@ fn bad_supervision_sections_name_what_is_wrong() {
         ("points = 10", "points = 0", "supervision.points must be > 0"),
         ("points = 10", "points = 10\nfocus_share = 1.5", "supervision.focus_share must be in [0, 1]"),
         ("points = 10", "points = 10\nfocus_factor = 0.5", "supervision.focus_factor must be >= 1"),
+        ("points = 10", "points = 10\nown_grid_share = 1.5", "supervision.own_grid_share must be in [0, 1]"),
         ("points = 10", "points = 10\nunder_weight = 0.5", "supervision.under_weight must be >= 1"),
     ];
     let section = base.rfind("[supervision]").unwrap();
