@@ -184,10 +184,11 @@ impl GridSupervision {
     /// drawn uniformly between the first and last solution's, `a` and `b` are the solutions on either side and
     /// the target is `(1 - w) V_a + w V_b` (`V` is nondecreasing in `beta`, since a faster planner only helps
     /// the adversary, so the blend lies between the two); otherwise, and for the last `own_grid_share` of the
-    /// rows, the solutions are taken in turn with `w = 0`, so such a point may lie anywhere in its grid. The point is a node of the nearer solution (a `focus_share` of them from near its minimum),
-    /// moved uniformly within its cell and drawn again until it also lies in the other solution's grid, and
-    /// the values there are each grid's multilinear interpolation: points between the nodes keep the sine
-    /// network from fitting the nodes while it oscillates between them.
+    /// rows, the solutions are taken in turn with `w = 0`, so such a point may lie anywhere in its grid. The
+    /// point is a node of the nearer solution (a `focus_share` of them from near its minimum), moved uniformly
+    /// within its cell and drawn again until it also lies in the other solution's grid, and the values there
+    /// are each grid's multilinear interpolation: points between the nodes keep the sine network from fitting
+    /// the nodes while it oscillates between them.
     pub fn batch(&self, iteration: u64, device: &Device) -> SupervisionBatch {
         let mut rng = rand::rngs::StdRng::seed_from_u64(self.seed ^ iteration.wrapping_mul(0xD1B5_4A32_D192_ED03));
         let m = self.points;
