@@ -322,7 +322,7 @@ impl TickSampler {
             )));
         }
         // Up to twice the largest TEB diameter: both branches of queryPlannerControl get exercised.
-        let largest = info.teb_table.iter().map(|row| row.level).filter(|l| l.is_finite()).fold(0.0, f64::max);
+        let largest = info.teb_table.iter().map(|row| row.bound).filter(|l| l.is_finite()).fold(0.0, f64::max);
         let d_obs_max = if largest > 0.0 { 4.0 * largest } else { 1.0 };
         Ok(Self { domain, planner_to_state: info.planner_to_state.clone(), planner_dim, d_obs_max })
     }
@@ -713,7 +713,7 @@ mod tests {
             }],
             planner_to_state: vec![1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0],
             planner_dim: 2,
-            teb_table: vec![pb::TebRow { beta: 1.0, level: 0.5, ..Default::default() }],
+            teb_table: vec![pb::TebRow { beta: 1.0, bound: 0.5, ..Default::default() }],
             ..Default::default()
         }
     }

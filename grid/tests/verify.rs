@@ -226,13 +226,13 @@ fn verify_and_check_shapes(scale: f64, level: f64, row_beta: f64, check_shapes: 
         "planner families {families:?}"
     );
     if check_shapes {
-        check_extents_at_served_levels(system, &evaluator, &written.manifest);
+        check_extents_at_set_levels(system, &evaluator, &written.manifest);
     }
     reports[0].clone()
 }
 
-/// Every row's extent is that of `{V <= served level}`: against a dense scan of the `(x, v)` plane.
-fn check_extents_at_served_levels(system: &AffineSystem, evaluator: &Evaluator, manifest: &Manifest) {
+/// Every row's extent is that of its certified set `{V <= set level}`: against a dense scan of the `(x, v)` plane.
+fn check_extents_at_set_levels(system: &AffineSystem, evaluator: &Evaluator, manifest: &Manifest) {
     let (x_dim, v_dim) = (&system.state[0], &system.state[1]);
     let scan: Vec<(f64, f64)> = (0..=200)
         .flat_map(|i| (0..=200).map(move |j| (i as f64 / 200.0, j as f64 / 200.0)))
@@ -241,21 +241,21 @@ fn check_extents_at_served_levels(system: &AffineSystem, evaluator: &Evaluator, 
     let states: Vec<f32> = scan.iter().flat_map(|&(x, v)| [x as f32, v as f32]).collect();
     let mut inside_domain = 0;
     for row in &manifest.teb_table {
-        let served = row.served_level();
+        let set_level = row.set_level();
         let values = evaluator.evaluate(&states, &vec![row.beta as f32; scan.len()]).unwrap().value;
         let dense = scan
             .iter()
             .zip(&values)
-            .filter(|(_, &v)| f64::from(v) <= served)
+            .filter(|(_, &v)| f64::from(v) <= set_level)
             .map(|((x, _), _)| x.abs())
             .fold(0.0, f64::max);
         assert!(
-            (row.extent[0] - dense).abs() <= 0.05 * served,
+            (row.extent[0] - dense).abs() <= 0.05 * set_level,
             "beta {}: extent {:?} vs {dense}",
             row.beta,
             row.extent
         );
-        assert!(row.boundary_radii.iter().all(|&r| r <= served), "no boundary radius beyond the level (V >= |x|)");
+        assert!(row.boundary_radii.iter().all(|&r| r <= set_level), "no boundary radius beyond the level (V >= |x|)");
         inside_domain += usize::from(dense < 0.9 * x_dim.max);
     }
     assert!(inside_domain >= 4, "only {inside_domain} rows' sets end inside the domain: the check needs some");

@@ -393,7 +393,7 @@ impl OnlineLoop {
             d_obs,
             beta_old,
             beta_query: row.beta,
-            dteb_radius: row.level,
+            dteb_radius: row.bound,
             steb_radius: speed.steb_radius,
             replanned,
             branch: Branch::Hold,

@@ -10,13 +10,13 @@ use crate::v1 as pb;
 pub struct SpeedRow {
     /// Planner speed bound `beta`.
     pub beta: f64,
-    /// The served level of the row's error set: the TEB radius at `beta`.
-    pub level: f64,
+    /// The row's tracking error bound: the TEB radius at `beta`.
+    pub bound: f64,
 }
 
 impl From<&pb::TebRow> for SpeedRow {
     fn from(row: &pb::TebRow) -> Self {
-        Self { beta: row.beta, level: row.level }
+        Self { beta: row.beta, bound: row.bound }
     }
 }
 
@@ -37,18 +37,18 @@ pub struct PlannerSpeed {
 
 /// queryPlannerControl: with no obstacle sensed (`d_obs = None`) the fastest row; otherwise, if the sTEB
 /// radius exceeds `d_obs / 2`, the slowest row (`beta_l`), else the largest `beta` whose radius is at most
-/// `d_obs / 2`. `rows` must be non-empty, sorted by `beta`, with monotone levels (as a validated manifest
+/// `d_obs / 2`. `rows` must be non-empty, sorted by `beta`, with monotone bounds (as a validated manifest
 /// and `GetModel` give them).
 pub fn query_planner_control(rows: &[SpeedRow], d_obs: Option<f64>) -> PlannerSpeed {
-    let steb_radius = rows[0].level;
+    let steb_radius = rows[0].bound;
     let row = match d_obs {
         None => rows.len() - 1,
-        Some(d) => rows.iter().rposition(|row| row.level <= d / 2.0).unwrap_or(0),
+        Some(d) => rows.iter().rposition(|row| row.bound <= d / 2.0).unwrap_or(0),
     };
     PlannerSpeed {
         beta: rows[row].beta,
         row,
-        dteb_radius: rows[row].level,
+        dteb_radius: rows[row].bound,
         steb_radius,
         steb_exceeds_half_distance: d_obs.is_some_and(|d| steb_radius > d / 2.0),
     }
@@ -64,9 +64,9 @@ pub fn row_for(rows: &[SpeedRow], beta: f64) -> Option<usize> {
 mod tests {
     use super::*;
 
-    /// A hand-made table: beta = 0.5 + 0.05 k, level = 0.2 + 0.1 k (k = 0..15).
+    /// A hand-made table: beta = 0.5 + 0.05 k, bound = 0.2 + 0.1 k (k = 0..15).
     fn table() -> Vec<SpeedRow> {
-        (0..16).map(|k| SpeedRow { beta: 0.5 + 0.05 * k as f64, level: 0.2 + 0.1 * k as f64 }).collect()
+        (0..16).map(|k| SpeedRow { beta: 0.5 + 0.05 * k as f64, bound: 0.2 + 0.1 * k as f64 }).collect()
     }
 
     #[test]
@@ -90,19 +90,19 @@ mod tests {
 
     #[test]
     fn largest_fitting_beta_is_chosen_never_a_larger_one() {
-        // d/2 = 0.75: levels 0.2..0.7 fit (k = 0..5), 0.8 does not.
+        // d/2 = 0.75: bounds 0.2..0.7 fit (k = 0..5), 0.8 does not.
         let q = query_planner_control(&table(), Some(1.5));
         assert!((q.beta - 0.75).abs() < 1e-12 && (q.dteb_radius - 0.7).abs() < 1e-9, "{q:?}");
-        // Exactly on a level: that row fits.
+        // Exactly on a bound: that row fits.
         let q = query_planner_control(&table(), Some(1.6));
         assert!((q.beta - 0.8).abs() < 1e-12, "{q:?}");
         assert!(!q.steb_exceeds_half_distance);
     }
 
     #[test]
-    fn a_raised_level_raises_the_radius() {
+    fn a_raised_bound_raises_the_radius() {
         let mut rows = table();
-        rows[0].level = 0.3;
+        rows[0].bound = 0.3;
         let q = query_planner_control(&rows, Some(0.5));
         assert!(q.steb_exceeds_half_distance && (q.steb_radius - 0.3).abs() < 1e-12);
     }

@@ -51,7 +51,8 @@ pub fn model_info(m: &Manifest, space: &StateSpace) -> pb::ModelInfo {
             .iter()
             .map(|row| pb::TebRow {
                 beta: row.beta,
-                level: row.served_level(),
+                bound: row.bound(),
+                set_level: row.set_level(),
                 learned_level: row.level,
                 verified_level: row.verification.as_ref().map(|v| v.verified_level),
                 extent: row.extent.clone(),

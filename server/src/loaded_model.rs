@@ -16,7 +16,7 @@ pub struct LoadedModel {
     pub space: StateSpace,
     /// The description sent by ListModels/GetModel.
     pub info: pb::ModelInfo,
-    /// The TEB table as the planner-speed rules read it: each row's `beta` and served level.
+    /// The TEB table as the planner-speed rules read it: each row's `beta` and bound.
     pub speeds: Vec<SpeedRow>,
     evaluator: Evaluator,
 }
@@ -62,9 +62,10 @@ impl LoadedModel {
         planner_speed::row_for(&self.speeds, beta).map(|i| &self.manifest.teb_table[i])
     }
 
-    /// `V <= TEB level` of the row for `beta`.
+    /// `V <= set level` of the row for `beta`: the relative state lies in the row's certified set, from which
+    /// its bound holds.
     pub fn in_teb(&self, value: f32, beta: f64) -> bool {
-        self.row_for(beta).is_some_and(|row| f64::from(value) <= row.served_level())
+        self.row_for(beta).is_some_and(|row| f64::from(value) <= row.set_level())
     }
 
     /// Evaluates `[N x n_state]` states with `[N x n_params]` params; blocks (compute-pool threads only).

@@ -168,7 +168,7 @@ impl Simulator {
             .ok_or_else(|| MethodError::Setup(format!("the simulator has no dynamics for system `{}`", info.system)))?;
         let tracker = Arc::new(Tracker::new(system).map_err(MethodError::Setup)?);
         let speeds: Vec<SpeedRow> = info.teb_table.iter().map(SpeedRow::from).collect();
-        let Some(fastest) = speeds.last().map(|row| row.level) else {
+        let Some(fastest) = speeds.last().map(|row| row.bound) else {
             return Err(MethodError::Setup("the model's TEB table is empty".into()));
         };
         let control_period = match settings.control_period {
@@ -203,7 +203,7 @@ impl Simulator {
 
     /// The sTEB radius (m): the bound at `beta_l`, by which worlds must be feasible.
     pub fn steb_radius(&self) -> f64 {
-        self.speeds[0].level
+        self.speeds[0].bound
     }
 
     /// The control period of every run (s).

@@ -45,8 +45,24 @@ async fn compare_and_verify_read_a_diagonal_bundle() {
         path(&results)
     );
     run("fastrack-grid", &verify.split_whitespace().collect::<Vec<_>>());
-    let manifest = Bundle::load(&verified.join("tiny-d4").join("1")).unwrap().manifest;
+    let verified_bundle = Bundle::load(&verified.join("tiny-d4").join("1")).unwrap();
+    let manifest = verified_bundle.manifest.clone();
     assert!(manifest.teb_table.iter().all(|row| row.verification.is_some()), "every row is verified");
+
+    // `reshape` measures the shapes again at each row's set level: from zeroed shapes it restores the ones
+    // verification wrote.
+    let mut flattened = manifest.clone();
+    for row in &mut flattened.teb_table {
+        row.extent.iter_mut().chain(&mut row.boundary_radii).for_each(|x| *x = 0.0);
+    }
+    let flat_repo = work.path().join("flattened");
+    let flat_dir = Bundle::write(&flat_repo, flattened, &verified_bundle.onnx).unwrap();
+    run("fastrack-grid", &["reshape", "--bundle", path(&flat_dir), "--out", path(&flat_repo)]);
+    let reshaped = Bundle::load(&flat_dir).unwrap().manifest;
+    for (got, want) in reshaped.teb_table.iter().zip(&manifest.teb_table) {
+        assert_eq!((&got.extent, &got.boundary_radii), (&want.extent, &want.boundary_radii), "beta {}", want.beta);
+        assert!(got.extent.iter().any(|&x| x > 0.0), "beta {}: an empty certified set", want.beta);
+    }
 
     // Only the lowest row of the unverified bundle: its verified level rises above the unverified rows over
     // it, so no bundle can be written, but the rollouts are not lost: the record is.
@@ -63,7 +79,8 @@ async fn compare_and_verify_read_a_diagonal_bundle() {
     assert!(said.contains("the record is written") && said.contains("verify it as well"), "{said}");
     let record = std::fs::read_to_string(results.join("tiny-lowest.md")).unwrap();
     let row = record.lines().find(|l| l.starts_with("| 0.5000 |")).expect("the row's result in the record");
-    assert_eq!(row.split('|').nth(6).map(str::trim), Some("-"), "no served level without a table: {row}");
+    let cells: Vec<&str> = row.split('|').map(str::trim).collect();
+    assert_eq!((cells[6], cells[7]), ("-", "-"), "no set level or bound without a table: {row}");
     assert!(!partial.exists(), "no bundle written");
 
     // GetModel serves every figure of each row's verification, as the manifest holds it.

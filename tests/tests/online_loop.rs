@@ -1,7 +1,7 @@
 //! The online loop (Alg. 3) against the real server on the shipped `dubins4d` model: the planner advances at
 //! per-axis speed at most `beta_query`; when `beta` drops next to an obstacle, adjustPlannerControl keeps `p*`
-//! if the tracker is inside the smaller bound, otherwise resets the planner to a free point inside it and
-//! replans, and holds the planner under the old bound when no point is; bad tracker states and a server that
+//! if the relative state is inside the smaller row's certified set, otherwise resets the planner to a free
+//! point inside it and replans, and holds the planner under the old bound when no point is; bad tracker states and a server that
 //! goes away are errors, never panics.
 
 use fastrack_client::{model_ref, pb, FastrackClient};
@@ -130,6 +130,61 @@ async fn a_drop_in_beta_with_no_planner_state_inside_the_smaller_bound_holds_und
     let next = online.step(&slow, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
     assert!(next.beta_query < next.beta_old && next.branch == Branch::Keep, "{next:?}");
     assert!(next.in_teb && next.dteb_radius <= next.d_obs.unwrap() / 2.0, "{next:?}");
+}
+
+/// Keep and reset take the planner only where the server's membership says the relative state is
+/// certified: `V <= set level` of the new row, never the larger `V <= bound`. A drop to `beta_l` on the first
+/// step with the tracker on the planner puts `p*` at zero position error; at headings and speeds where `V`
+/// lies between the 0.5 row's set level (0.652) and its bound (0.730) a loop that took the bound's level set
+/// for the certified one would keep there.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn the_loop_never_keeps_or_resets_outside_the_certified_set() {
+    let (_server, client) = shipped_server().await;
+    let info = client.get_model(model_ref("dubins4d", 0)).await.unwrap();
+    let row_for = |beta: f64| info.teb_table.iter().find(|r| r.beta >= beta - 1e-12).unwrap();
+    // 1.5 m from the tracker: only the slowest row's bound fits half of it.
+    let obstacle = Obstacle::Circle { center: [0.0, -2.0], radius: 0.5 };
+    let trackers: Vec<[f64; 4]> = (0..16)
+        .flat_map(|k| [0.5, 1.0, 1.5].map(|v| [0.0, 0.0, -3.0 + 0.4 * k as f64, v]))
+        .chain([[0.0, 0.0, 0.074, 1.0]])
+        .collect();
+    let flat = trackers.iter().flatten().copied().collect();
+    let slowest = &info.teb_table[0];
+    let at_start = client
+        .evaluate_value(model_ref("dubins4d", 0), flat, vec![slowest.beta; trackers.len()], pb::OutOfDomainPolicy::Flag)
+        .await
+        .unwrap();
+    let mut planner = GridAStar::default();
+    let (mut uncertified, mut branches) = (0, Vec::new());
+    for (tracker, &value) in trackers.iter().zip(&at_start.values) {
+        let mut online = OnlineLoop::start(&client, settings(), [0.0, 0.0]).await.unwrap();
+        let step = online.step(tracker, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
+        assert!(step.beta_query < step.beta_old || step.branch == Branch::Hold, "{step:?}");
+        let uncertified_start = value > slowest.set_level && value <= slowest.bound;
+        uncertified += usize::from(uncertified_start);
+        match step.branch {
+            Branch::Keep | Branch::Reset => {
+                let row = row_for(step.beta_query);
+                assert!(step.in_teb && step.value <= row.set_level, "{tracker:?}: {step:?} outside {}", row.set_level);
+                if step.branch == Branch::Keep {
+                    assert!(value <= slowest.set_level, "kept at zero error with V {value} > {}", slowest.set_level);
+                }
+            }
+            Branch::Hold => assert_eq!(step.beta_query, step.beta_old),
+            Branch::Advance => panic!("a drop in beta is never an advance: {step:?}"),
+        }
+        branches.push(step.branch);
+    }
+    let count = |b: Branch| branches.iter().filter(|&&x| x == b).count();
+    eprintln!(
+        "{} starts, {uncertified} between the set level and the bound: keep {}, reset {}, hold {}",
+        trackers.len(),
+        count(Branch::Keep),
+        count(Branch::Reset),
+        count(Branch::Hold)
+    );
+    assert!(uncertified > 0, "the starts include states only the bound's level set would cover");
+    assert!(count(Branch::Keep) > 0 && count(Branch::Reset) + count(Branch::Hold) > 0, "{branches:?}");
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -63,7 +63,7 @@ async fn one_server_serves_dubins4d_and_quad10d_and_refuses_bad_quad_input() {
         // in_teb is judged at the slowest axis' table row at or above the largest beta.
         let beta = betas[3 * i..3 * i + 3].iter().copied().fold(f64::NEG_INFINITY, f64::max);
         let row = manifest.teb_table.iter().find(|r| r.beta >= beta - 1e-12).unwrap();
-        assert_eq!(served.in_teb[i], served.values[i] <= row.level, "in_teb of item {i}");
+        assert_eq!(served.in_teb[i], served.values[i] <= row.set_level(), "in_teb of item {i}");
     }
     // The parameters reach the graph: the same state at other per-axis bounds has another value.
     let one = &states[..10];

@@ -49,7 +49,7 @@ async fn every_rpc_answers_like_the_in_process_evaluator() {
     assert_eq!(latest.state.iter().map(|d| d.name.as_str()).collect::<Vec<_>>(), ["x_r", "y_r", "theta", "v"]);
     assert_eq!(latest.teb_table.len(), 16);
     for (row, expected) in latest.teb_table.iter().zip(&manifest.teb_table) {
-        assert_eq!((row.beta, row.level), (expected.beta, expected.level));
+        assert_eq!((row.beta, row.bound, row.set_level), (expected.beta, expected.bound(), expected.set_level()));
     }
     assert_eq!(client.get_model(model_ref("dubins-test", 1)).await.unwrap().version, 1);
 
@@ -69,7 +69,7 @@ async fn every_rpc_answers_like_the_in_process_evaluator() {
     for i in 0..64 {
         let beta = params[2 * i].max(params[2 * i + 1]);
         let row = manifest.teb_table.iter().find(|r| r.beta >= beta - 1e-12).unwrap();
-        assert_eq!(served.in_teb[i], served.values[i] <= row.level, "in_teb of item {i}");
+        assert_eq!(served.in_teb[i], served.values[i] <= row.set_level(), "in_teb of item {i}");
     }
     let control = client
         .tracking_control(
@@ -102,7 +102,7 @@ async fn every_rpc_answers_like_the_in_process_evaluator() {
     // GetTrackingErrorBound: the next table row at or above beta, never interpolated.
     let teb = client.tracking_error_bound(model_ref("dubins-test", 0), 0.81, 8).await.unwrap();
     let row = manifest.teb_table.iter().find(|r| r.beta >= 0.81).unwrap();
-    assert_eq!((teb.table_beta, teb.level, teb.radius), (row.beta, row.level, row.level));
+    assert_eq!((teb.table_beta, teb.level, teb.radius), (row.beta, row.set_level(), row.bound()));
     assert_eq!(teb.extent, row.extent);
     assert_eq!(teb.boundary.len(), 16);
     for p in teb.boundary.chunks(2) {
@@ -180,8 +180,8 @@ async fn track_stream_answers_every_tick_in_order_and_keeps_beta_old() {
         let local = reference.evaluate(&f32s(&r), &[reply.beta_query as f32; 2]).unwrap();
         assert!(close(reply.value, local.value[0]));
         assert_eq!(reply.control, local.control.iter().map(|&x| f64::from(x)).collect::<Vec<_>>());
-        let level = manifest.teb_table.iter().find(|row| row.beta >= reply.beta_query - 1e-12).unwrap().level;
-        assert_eq!(reply.in_teb, reply.value <= level);
+        let row = manifest.teb_table.iter().find(|row| row.beta >= reply.beta_query - 1e-12).unwrap();
+        assert_eq!(reply.in_teb, reply.value <= row.set_level());
         assert!(reply.in_domain);
     }
 

@@ -23,18 +23,20 @@ async fn the_shipped_dubins4d_model_is_trained_verified_and_served() {
     assert!(manifest.teb_table.len() >= 16);
     for row in &manifest.teb_table {
         let verification = row.verification.as_ref().expect("every row verified");
-        assert!(row.served_level() >= row.level && row.served_level() >= verification.verified_level);
+        assert!(row.bound() >= row.level && row.bound() >= verification.verified_level);
+        // The certified set is the one verification sampled from, never the larger set of the bound.
+        assert_eq!(Some(row.set_level()), verification.sampled_level);
     }
 
     let (_server, client) = TestServer::start_serving(&repo).await;
     for row in &manifest.teb_table {
         let teb = client.tracking_error_bound(model_ref("dubins4d", 0), row.beta, 0).await.unwrap();
-        assert_eq!((teb.level, teb.table_beta), (row.served_level(), row.beta));
+        assert_eq!((teb.level, teb.radius, teb.table_beta), (row.set_level(), row.bound(), row.beta));
     }
     let slow = &manifest.teb_table[0];
-    let speed = client.query_planner_control(model_ref("dubins4d", 0), Some(2.0 * slow.served_level())).await.unwrap();
-    let expected = manifest.teb_table.iter().rev().find(|r| r.served_level() <= slow.served_level()).unwrap();
-    assert_eq!(speed.beta_query, expected.beta);
+    let speed = client.query_planner_control(model_ref("dubins4d", 0), Some(2.0 * slow.bound())).await.unwrap();
+    let expected = manifest.teb_table.iter().rev().find(|r| r.bound() <= slow.bound()).unwrap();
+    assert_eq!((speed.beta_query, speed.dteb_radius), (expected.beta, expected.bound()));
 
     let mut rng = rand::rngs::StdRng::seed_from_u64(3);
     let (n, mut states, mut params) = (2000, Vec::new(), Vec::new());

@@ -43,7 +43,7 @@ async fn an_exported_bundle_is_served() {
     // Every table row is served as written.
     for row in &manifest.teb_table {
         let teb = client.tracking_error_bound(model_ref("tiny-di", 1), row.beta, 0).await.unwrap();
-        assert_eq!(teb.level, row.served_level());
+        assert_eq!((teb.level, teb.radius), (row.set_level(), row.bound()));
         assert_eq!(teb.table_beta, row.beta);
     }
     // Values, gradients and controls equal the exported graph's in-process answers.

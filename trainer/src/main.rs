@@ -113,7 +113,7 @@ enum Command {
         #[arg(long, default_value = "models")]
         out: PathBuf,
     },
-    /// Draws a bundle's TEB table (served level, measured `V_min`) against `beta`, with grid solutions'
+    /// Draws a bundle's TEB table (bound, certified set level, measured `V_min`) against `beta`, with grid solutions'
     /// `V_min` beside it.
     PlotTeb {
         /// The bundle's version folder, e.g. `models/dubins4d/4`.

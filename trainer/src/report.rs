@@ -31,12 +31,18 @@ pub fn plot_losses(run: &RunDir) -> anyhow::Result<PathBuf> {
     Ok(path)
 }
 
-/// Draws the TEB radius (served level) against `beta`, with reference points (e.g. a grid solution).
+/// Draws the TEB radius (the row's bound) and the certified set's level against `beta`, with reference points
+/// (e.g. a grid solution).
 pub fn plot_teb(path: &Path, rows: &[TebRow], references: &[(&str, Vec<(f64, f64)>)]) -> anyhow::Result<()> {
     let mut series = vec![
         Series {
-            label: "learned level (served)".into(),
-            points: rows.iter().map(|r| (r.beta, r.served_level())).collect(),
+            label: "error bound (served radius)".into(),
+            points: rows.iter().map(|r| (r.beta, r.bound())).collect(),
+            markers: false,
+        },
+        Series {
+            label: "certified set level (membership)".into(),
+            points: rows.iter().map(|r| (r.beta, r.set_level())).collect(),
             markers: false,
         },
         Series {
@@ -53,7 +59,7 @@ pub fn plot_teb(path: &Path, rows: &[TebRow], references: &[(&str, Vec<(f64, f64
     let chart = Chart {
         title: "Tracking error bound against planner speed",
         x_label: "beta (m/s)",
-        y_label: "TEB radius (m)",
+        y_label: "TEB radius, level (m)",
         log_y: false,
     };
     line_chart(path, &chart, &series).map_err(anyhow::Error::msg)

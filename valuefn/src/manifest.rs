@@ -193,7 +193,7 @@ pub struct TebRow {
     pub level: f64,
     /// The smallest value found by the search at this `beta`, before monotone correction.
     pub measured_min: f64,
-    /// Half-widths of the bounding box of the error set `{r : V(r) <= served level}` along each error
+    /// Half-widths of the bounding box of the certified set `{r : V(r) <= set_level}` along each error
     /// coordinate.
     pub extent: Vec<f64>,
     /// Radii of that set's projection onto the error coordinates along [`boundary_directions`] (for drawing).
@@ -204,12 +204,25 @@ pub struct TebRow {
 }
 
 impl TebRow {
-    /// The level a server serves: `max(level, verified_level)`.
-    pub fn served_level(&self) -> f64 {
-        match &self.verification {
-            Some(v) => self.level.max(v.verified_level),
-            None => self.level,
-        }
+    /// The level of the certified set `{r : V(r; beta) <= set_level}`: the set verification sampled from
+    /// (its final round's `sampled_level`), or the learned `level` where the row is unverified. Membership
+    /// in the row's bound is membership in this set; only from inside it does [`bound`](Self::bound) hold.
+    /// With the `set` correction the sampled level rose with the error, so the set holds its own level and
+    /// the two numbers coincide; with the `bound` correction the set is the first round's and only the
+    /// bound rose.
+    pub fn set_level(&self) -> f64 {
+        self.verification.as_ref().and_then(|v| v.sampled_level).unwrap_or(self.level)
+    }
+
+    /// The tracking error bound (the TEB radius), a distance in the error coordinates: the largest error
+    /// verification reached from the certified set (kept monotone in `beta`), and never below the set's own
+    /// level (inside it `|e| <= V <= set_level` already at the start) nor the learned `level`; the learned
+    /// `level` where the row is unverified. It is the number the speed rule compares with `d_obs / 2`, and it
+    /// holds for relative states inside the set of [`set_level`](Self::set_level). With the `set` correction
+    /// it equals the set level unless the verification's slack let the error pass it.
+    pub fn bound(&self) -> f64 {
+        let verified = self.verification.as_ref().map_or(0.0, |v| v.verified_level);
+        self.level.max(self.set_level()).max(verified)
     }
 }
 
@@ -544,8 +557,8 @@ impl Manifest {
             if !(row.level.is_finite() && row.level > 0.0) {
                 return fail(field, format!("level must be finite and > 0, got {}", row.level));
             }
-            if i > 0 && row.served_level() < rows[i - 1].served_level() {
-                return fail(field, "levels must not decrease with beta (a conservative table is monotone)");
+            if i > 0 && row.bound() < rows[i - 1].bound() {
+                return fail(field, "bounds must not decrease with beta (a conservative table is monotone)");
             }
             if row.extent.len() != n_error || row.extent.iter().any(|x| !x.is_finite() || *x < 0.0) {
                 return fail(field, format!("extent must hold {n_error} finite non-negative numbers"));
@@ -556,6 +569,9 @@ impl Manifest {
             if let Some(v) = &row.verification {
                 if !v.verified_level.is_finite() || v.verified_level < 0.0 {
                     return fail(field, "verification.verified_level must be finite and >= 0");
+                }
+                if v.sampled_level.is_some_and(|l| !(l.is_finite() && l > 0.0)) {
+                    return fail(field, "verification.sampled_level must be finite and > 0");
                 }
             }
         }

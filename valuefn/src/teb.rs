@@ -191,10 +191,10 @@ fn error_set_shape(
     Ok((extent, radii))
 }
 
-/// Recomputes each row's extent and boundary radii at its served level (`max(level, verified_level)`), as
-/// they must be once verification has raised a level: the shape clients draw is then that of the set the
-/// served radius bounds, not of the (much smaller) learned minimum level set.
-pub fn reshape_at_served_levels(
+/// Recomputes each row's extent and boundary radii at its set level ([`TebRow::set_level`]), as they must be
+/// once verification has chosen the set it certifies: the shape clients draw is then that of the set inside
+/// which the row's bound holds, not of the (smaller) learned minimum level set.
+pub fn reshape_at_set_levels(
     oracle: &dyn ValueOracle,
     system: &AffineSystem,
     rows: &mut [TebRow],
@@ -203,7 +203,7 @@ pub fn reshape_at_served_levels(
     let mut rng = rand::rngs::StdRng::seed_from_u64(options.seed);
     for row in rows {
         let params = vec![row.beta; system.n_params()];
-        let (extent, boundary_radii) = error_set_shape(oracle, system, &params, row.served_level(), options, &mut rng)?;
+        let (extent, boundary_radii) = error_set_shape(oracle, system, &params, row.set_level(), options, &mut rng)?;
         row.extent = extent;
         row.boundary_radii = boundary_radii;
     }

@@ -2,7 +2,8 @@
 
 use fastrack_valuefn::bundle::{Bundle, BundleError};
 use fastrack_valuefn::manifest::{
-    AxisNetworkInfo, Manifest, NetworkInfo, Provenance, SystemInfo, TebRow, COMPOSITE_KIND, SCHEMA_VERSION,
+    AxisNetworkInfo, Manifest, NetworkInfo, Provenance, SystemInfo, TebRow, Verification, COMPOSITE_KIND,
+    SCHEMA_VERSION,
 };
 use fastrack_valuefn::network::PeriodicEncoding;
 use fastrack_valuefn::system::dubins4d;
@@ -84,7 +85,22 @@ fn each_invariant_names_its_field() {
     assert!(field_error(m).contains("at least 16 rows, got 5"));
     let mut m = manifest();
     m.teb_table[7].level = 0.1;
-    assert!(field_error(m).starts_with("teb_table[7]: levels must not decrease"));
+    assert!(field_error(m).starts_with("teb_table[7]: bounds must not decrease"));
+    let mut m = manifest();
+    m.teb_table[3].verification = Some(Verification {
+        verified_level: m.teb_table[3].level,
+        eps: 0.1,
+        delta: 0.1,
+        samples: 10,
+        violations: 0,
+        horizon: 1.0,
+        step: 0.01,
+        sampled_level: Some(f64::NAN),
+        correction: Some("bound".into()),
+        rounds: 1,
+        planners: Vec::new(),
+    });
+    assert!(field_error(m).starts_with("teb_table[3]: verification.sampled_level must be finite and > 0"));
     let mut m = manifest();
     m.teb_table[15].beta = 1.2;
     assert!(field_error(m).contains("must span the parameter range [0.5, 1.25]"));
@@ -132,4 +148,51 @@ fn bundle_checksum_and_location_are_checked() {
     std::fs::copy(dir.join("manifest.json"), moved.join("manifest.json")).unwrap();
     let err = Bundle::load(&moved).unwrap_err();
     assert!(err.to_string().contains("folder says m/2, manifest says m/1"), "{err}");
+}
+
+/// A verification of `row` that sampled `{V <= sampled}` with `correction` and reached `verified`.
+fn verified(row: &TebRow, sampled: f64, verified: f64, correction: &str) -> TebRow {
+    TebRow {
+        verification: Some(Verification {
+            verified_level: verified,
+            eps: 1e-3,
+            delta: 1e-6,
+            samples: 29_632,
+            violations: 0,
+            horizon: 10.0,
+            step: 0.01,
+            sampled_level: Some(sampled),
+            correction: Some(correction.into()),
+            rounds: 2,
+            planners: Vec::new(),
+        }),
+        ..row.clone()
+    }
+}
+
+#[test]
+fn a_row_serves_the_set_it_certified_and_the_bound_from_inside_it() {
+    let row = TebRow {
+        beta: 0.5,
+        level: 0.5876,
+        measured_min: 0.5876,
+        extent: vec![0.6, 0.6],
+        boundary_radii: Vec::new(),
+        verification: None,
+    };
+    // Unverified: the learned level for both.
+    assert_eq!((row.set_level(), row.bound()), (0.5876, 0.5876));
+    // The `bound` correction: the first round's set, the bound raised to the largest error (dubins4d/4, 0.5).
+    let by_bound = verified(&row, 0.6515, 0.7300, "bound");
+    assert_eq!((by_bound.set_level(), by_bound.bound()), (0.6515, 0.7300));
+    // The error never reached the set's level: inside the set `|e| <= V <= 0.6515` already, so the bound
+    // is the level.
+    let below = verified(&row, 0.6515, 0.6400, "bound");
+    assert_eq!((below.set_level(), below.bound()), (0.6515, 0.6515));
+    // The `set` correction: one number for both.
+    let by_set = verified(&row, 0.7300, 0.7300, "set");
+    assert_eq!(by_set.set_level(), by_set.bound());
+    // Never below the learned level.
+    let low = verified(&row, 0.3, 0.3, "set");
+    assert_eq!((low.set_level(), low.bound()), (0.3, 0.5876));
 }

@@ -55,7 +55,7 @@ fn model_json(m: &pb::ModelInfo) -> Value {
             "min": p.range.map(|r| r.min), "max": p.range.map(|r| r.max)})).collect::<Vec<_>>(),
         "controls": m.controls.iter().map(|c| json!({"name": c.name, "unit": c.unit,
             "min": c.bounds.map(|b| b.min), "max": c.bounds.map(|b| b.max)})).collect::<Vec<_>>(),
-        "teb_table": m.teb_table.iter().map(|r| json!({"beta": r.beta, "level": r.level,
+        "teb_table": m.teb_table.iter().map(|r| json!({"beta": r.beta, "set_level": r.set_level, "bound": r.bound,
             "learned_level": r.learned_level, "verified_level": r.verified_level, "extent": r.extent,
             "verification": r.verification.as_ref().map(verification_json)})).collect::<Vec<_>>(),
         "onnx_sha256": m.onnx_sha256,
@@ -90,11 +90,15 @@ fn model_text(m: &pb::ModelInfo) -> String {
         let r = p.range.unwrap_or_default();
         out += &format!("\n    {:<8} [{}, {}] {}", p.name, r.min, r.max, p.unit);
     }
-    out += "\n  TEB table:\n    beta      level    learned  verified  evidence";
+    out += "\n  TEB table (set level: membership, V <= it; bound: the error from inside that set):";
+    out += "\n    beta      set lvl  bound    learned  verified  evidence";
     for r in &m.teb_table {
         let verified = r.verified_level.map_or("-".to_string(), |v| format!("{v:.4}"));
         let evidence = r.verification.as_ref().map_or(String::new(), verification_text);
-        out += &format!("\n    {:<8.4}  {:<7.4}  {:<7.4}  {verified:<8}  {evidence}", r.beta, r.level, r.learned_level);
+        out += &format!(
+            "\n    {:<8.4}  {:<7.4}  {:<7.4}  {:<7.4}  {verified:<8}  {evidence}",
+            r.beta, r.set_level, r.bound, r.learned_level
+        );
     }
     out
 }

@@ -556,7 +556,7 @@ async fn fleet(client: &FastrackClient, args: FleetArgs, json_mode: bool) -> any
 }
 
 async fn world(client: &FastrackClient, args: WorldArgs, json_mode: bool) -> anyhow::Result<()> {
-    let steb = args.generation.inflation(speeds(client, &args.model).await?[0].level)?;
+    let steb = args.generation.inflation(speeds(client, &args.model).await?[0].bound)?;
     let world = world_of(args.check.as_ref(), &args.generation, args.seed, steb)?;
     let text = world.to_toml();
     match (&args.check, &args.out) {

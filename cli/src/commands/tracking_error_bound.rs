@@ -20,7 +20,8 @@ pub struct Args {
     version: u32,
 }
 
-/// Prints the level, radius and extent of the error set at `beta` (and boundary points if asked).
+/// Prints the certified set's level and extent at `beta`, the error bound (radius) that holds from inside it,
+/// and boundary points if asked.
 pub async fn run(client: &FastrackClient, args: Args, json_mode: bool) -> anyhow::Result<()> {
     let r = client.tracking_error_bound(model_ref(&args.name, args.version), args.beta, args.boundary).await?;
     print(
@@ -28,7 +29,7 @@ pub async fn run(client: &FastrackClient, args: Args, json_mode: bool) -> anyhow
         json!({"level": r.level, "radius": r.radius, "extent": r.extent, "table_beta": r.table_beta, "boundary": r.boundary, "model_version": r.model_version}),
         || {
             let mut s = format!(
-                "level = {:.4}  radius = {:.4}  extent = {:?}  (table beta {:.4})",
+                "set level = {:.4}  bound (radius) = {:.4}  extent = {:?}  (table beta {:.4})",
                 r.level, r.radius, r.extent, r.table_beta
             );
             for p in r.boundary.chunks(r.extent.len().max(1)) {

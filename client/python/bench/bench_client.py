@@ -55,7 +55,7 @@ class Inputs:
         self.beta = (info.params[0].range.min, info.params[0].range.max)
         self.n_params = len(info.params)
         self.q = np.array(info.planner_to_state).reshape(len(info.state), info.planner_dim)
-        self.d_obs_max = 4.0 * max(row.level for row in info.teb_table)
+        self.d_obs_max = 4.0 * max(row.bound for row in info.teb_table)
 
     def batch(self, n: int) -> tuple[Array, Array]:
         states = self.rng.uniform(self.lo, self.hi, (n, len(self.lo)))

@@ -119,7 +119,7 @@ def simulate(
         planner=planner,
         seed=seed,
     ) as loop:
-        sensing = sensor_range if sensor_range is not None else 2.0 * loop.speeds[-1].level
+        sensing = sensor_range if sensor_range is not None else 2.0 * loop.speeds[-1].bound
         for k in range(math.ceil(time_limit / control_period)):
             position = (s[0], s[1])
             outcome.time = k * control_period

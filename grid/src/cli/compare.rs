@@ -50,7 +50,7 @@ const COLUMNS: [&str; 10] = [
     "grid V_min",
     "learned V_min (grid nodes)",
     "learned / grid",
-    "table level",
+    "table bound",
     "mean |dV| on set",
     "max |dV| on set",
     "control = grid's on set",
@@ -59,18 +59,18 @@ const COLUMNS: [&str; 10] = [
     "slice",
 ];
 
-/// The level the bundle serves at `beta`: its first row at or above it.
-fn served_level(manifest: &Manifest, beta: f64) -> Option<f64> {
-    manifest.teb_table.iter().find(|r| r.beta >= beta - 1e-9).map(|r| r.served_level())
+/// The error bound the bundle serves at `beta`: its first row at or above it.
+fn table_bound(manifest: &Manifest, beta: f64) -> Option<f64> {
+    manifest.teb_table.iter().find(|r| r.beta >= beta - 1e-9).map(|r| r.bound())
 }
 
 /// A table row's cells after `beta`.
-fn cells(system: &AffineSystem, c: &Comparison, level: Option<f64>, png: &Path) -> Vec<String> {
+fn cells(system: &AffineSystem, c: &Comparison, bound: Option<f64>, png: &Path) -> Vec<String> {
     vec![
         format!("{:.4}", c.grid_v_min),
         format!("{:.4}", c.learned_v_min),
         format!("{:.3}", c.ratio),
-        level.map_or("-".into(), |l| format!("{l:.4}")),
+        bound.map_or("-".into(), |b| format!("{b:.4}")),
         format!("{:.4}", c.mean_abs_error),
         format!("{:.4}", c.max_abs_error),
         system
@@ -139,10 +139,10 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         let png = args.outputs.results_dir.join(format!("{name}-beta{beta}.png"));
         let title = format!("{} beta {beta}", manifest.name);
         let (c, s) = compare_and_draw(&system, &solution, &learned, args.sublevel_factor, &png, &title)?;
-        let level = served_level(manifest, beta);
-        table.row([vec![beta.to_string()], cells(&system, &c, level, &png)].concat());
+        let bound = table_bound(manifest, beta);
+        table.row([vec![beta.to_string()], cells(&system, &c, bound, &png)].concat());
         rows.push(
-            json!({ "comparison": c, "table_level": level, "slice_cut": s.cut, "plot": png.display().to_string(),
+            json!({ "comparison": c, "table_bound": bound, "slice_cut": s.cut, "plot": png.display().to_string(),
             "grid": solution.grid.axes(), "solver": solution.info.config, "horizon": solution.info.horizon,
             "converged": solution.info.converged }),
         );
@@ -181,7 +181,7 @@ fn run_axes(
     let mut rows = Vec::new();
     for beta in betas {
         let pairs = axes_at(id, axes, &solutions, beta)?;
-        let level = served_level(manifest, beta);
+        let bound = table_bound(manifest, beta);
         for (k, (axis, _)) in pairs.iter().enumerate() {
             let slice = combined_on_axis(&system, &pairs, k);
             let subsystem = by_id(axis.subsystem).with_context(|| format!("unknown system `{}`", axis.subsystem))?;
@@ -190,8 +190,8 @@ fn run_axes(
             let png = args.outputs.results_dir.join(format!("{name}-beta{beta}-{axis_name}.png"));
             let title = format!("{} beta {beta}, along {axis_name}", manifest.name);
             let (c, s) = compare_and_draw(&subsystem, &slice.reference, &learned, args.sublevel_factor, &png, &title)?;
-            table.row([vec![beta.to_string(), axis_name.to_string()], cells(&subsystem, &c, level, &png)].concat());
-            rows.push(json!({ "axis": axis_name, "comparison": c, "table_level": level, "base_state": slice.base,
+            table.row([vec![beta.to_string(), axis_name.to_string()], cells(&subsystem, &c, bound, &png)].concat());
+            rows.push(json!({ "axis": axis_name, "comparison": c, "table_bound": bound, "base_state": slice.base,
                 "slice_cut": s.cut, "plot": png.display().to_string(), "grid": slice.reference.grid.axes(),
                 "solver": slice.reference.info.config, "horizon": slice.reference.info.horizon,
                 "converged": slice.reference.info.converged }));

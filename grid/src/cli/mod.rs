@@ -42,6 +42,8 @@ enum Command {
     Verify(verify::Args),
     /// Merges the parts of a sharded `verify` into the verified bundle and the record a single run writes.
     VerifyMerge(verify::MergeArgs),
+    /// Measures a bundle's error-set shapes (extent, boundary radii) again at each row's set level.
+    Reshape(verify::ReshapeArgs),
     /// What a verification's rollouts cost per state and step, one state per call against batched on every
     /// core, with the projected wall time of a row and a table; a record.
     VerifyBench(verify_bench::Args),
@@ -61,6 +63,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Compare(args) => compare::run(args),
         Command::Verify(args) => verify::run(args),
         Command::VerifyMerge(args) => verify::merge(args),
+        Command::Reshape(args) => verify::reshape(args),
         Command::VerifyBench(args) => verify_bench::run(args),
         Command::Rollout(args) => rollout::run(args),
         Command::Bench(args) => bench::run(args),

@@ -10,11 +10,12 @@ use fastrack_grid::verify::{
     VerifyOptions,
 };
 use fastrack_valuefn::bundle::Bundle;
-use fastrack_valuefn::manifest::Manifest;
+use fastrack_valuefn::manifest::{Manifest, TebRow};
 use fastrack_valuefn::record::{write_record, Table};
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
 use fastrack_valuefn::shard::{Part, Shard};
 use fastrack_valuefn::system::{for_bundle, AffineSystem};
+use fastrack_valuefn::teb::{reshape_at_set_levels, TebOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use std::path::{Path, PathBuf};
@@ -163,6 +164,43 @@ pub struct MergeArgs {
     results_dir: PathBuf,
 }
 
+/// Arguments of `reshape`.
+#[derive(clap::Args)]
+pub struct ReshapeArgs {
+    /// The bundle's version folder, e.g. `models/dubins4d/4`.
+    #[arg(long)]
+    bundle: PathBuf,
+    /// Repository root the reshaped bundle is written into (`<out>/<name>/<version>/`; the bundle's own
+    /// repository rewrites it in place).
+    #[arg(long)]
+    out: PathBuf,
+    /// ONNX Runtime library (default: FASTRACK_ORT_LIB, then .cache/onnxruntime).
+    #[arg(long)]
+    ort_lib: Option<PathBuf>,
+}
+
+/// Runs `reshape`: every row's extent and boundary radii measured again at its set level, as verification
+/// leaves them, for a bundle whose shapes were measured at another level.
+pub fn reshape(args: ReshapeArgs) -> anyhow::Result<()> {
+    let Loaded { bundle, system, evaluator } = load(&args.bundle, args.ort_lib.as_deref())?;
+    let mut manifest = bundle.manifest.clone();
+    reshape_at_set_levels(&evaluator, &system, &mut manifest.teb_table, &TebOptions::default())
+        .map_err(anyhow::Error::msg)?;
+    for (before, after) in bundle.manifest.teb_table.iter().zip(&manifest.teb_table) {
+        println!(
+            "beta {:.4}: set level {:.4}, bound {:.4}; extent {:?} -> {:?}",
+            after.beta,
+            after.set_level(),
+            after.bound(),
+            before.extent.iter().map(|x| format!("{x:.3}")).collect::<Vec<_>>(),
+            after.extent.iter().map(|x| format!("{x:.3}")).collect::<Vec<_>>()
+        );
+    }
+    let dir = Bundle::write(&args.out, manifest, &bundle.onnx)?;
+    println!("wrote the reshaped bundle {}", dir.display());
+    Ok(())
+}
+
 /// A bundle with what verifying it needs.
 struct Loaded {
     bundle: Bundle,
@@ -291,8 +329,8 @@ struct Outputs<'a> {
 }
 
 /// Writes `reports` into the bundle's table, prints and records them, and writes the verified bundle. A table
-/// the reports cannot be written into (a subset of rows that breaks the monotone levels) still gets its record,
-/// without served levels, before the error.
+/// the reports cannot be written into (a subset of rows that breaks the monotone bounds) still gets its record,
+/// without the rows' set levels and bounds, before the error.
 fn finish(
     evaluator: &Evaluator,
     bundle: Bundle,
@@ -309,7 +347,8 @@ fn finish(
         "rounds",
         "sampled level",
         "verified level",
-        "served level",
+        "set level",
+        "bound",
         "violations / N",
         "hardest planner",
         "max l per planner",
@@ -320,11 +359,9 @@ fn finish(
     ]);
     for r in &reports {
         let v = &r.verification;
-        let served = applied
-            .as_ref()
-            .ok()
-            .and_then(|()| manifest.teb_table.iter().find(|row| row.beta == r.beta))
-            .map_or_else(|| "-".to_string(), |row| format!("{:.4}", row.served_level()));
+        let applied_row = applied.as_ref().ok().and_then(|()| manifest.teb_table.iter().find(|row| row.beta == r.beta));
+        let [set_level, bound] = [TebRow::set_level, TebRow::bound]
+            .map(|number| applied_row.map_or_else(|| "-".to_string(), |row| format!("{:.4}", number(row))));
         let levels: Vec<String> = r.rounds.iter().map(|round| format!("{:.4}", round.level)).collect();
         println!(
             "beta {:.4}: level {:.4}, rounds at {} -> verified {:.4} ({} of {} samples broke the last), {:.0} s",
@@ -343,7 +380,8 @@ fn finish(
             format!("{}", r.rounds.len()),
             format!("{:.4}", r.sampled_level()),
             format!("{:.4}", v.verified_level),
-            served,
+            set_level,
+            bound,
             format!("{} / {}", v.violations, v.samples),
             v.hardest_planner().map_or_else(String::new, |p| p.family.clone()),
             per_planner.join("; "),

@@ -35,7 +35,7 @@ use fastrack_valuefn::runtime::{Evaluator, RuntimeError};
 use fastrack_valuefn::shard::Shard;
 use fastrack_valuefn::simulation::Planner;
 use fastrack_valuefn::system::AffineSystem;
-use fastrack_valuefn::teb::{reshape_at_served_levels, TebOptions};
+use fastrack_valuefn::teb::{reshape_at_set_levels, TebOptions};
 use indicatif::ProgressBar;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -163,8 +163,8 @@ pub enum VerifyError {
     /// A setting is out of range.
     #[error("{0}")]
     Setting(String),
-    /// The error sets at the served levels could not be measured.
-    #[error("measuring the error set at the served level: {0}")]
+    /// The certified sets could not be measured.
+    #[error("measuring the certified set at its level: {0}")]
     Shape(String),
     /// The bundle's system is not the one given.
     #[error("the bundle is for system `{bundle}`, not `{system}`")]
@@ -571,8 +571,8 @@ pub struct Selection<'a> {
 }
 
 /// Verifies the rows of `manifest` the selection names, writing each
-/// result into its row's `verification` (raised where needed to keep served levels monotone in `beta`) and
-/// every row's extent and boundary radii at its served level; returns the reports (raw maxima) in row order.
+/// result into its row's `verification` (raised where needed to keep the bounds monotone in `beta`) and
+/// every row's extent and boundary radii at its set level; returns the reports (raw maxima) in row order.
 pub fn verify_table(
     evaluator: &Evaluator,
     manifest: &mut Manifest,
@@ -626,8 +626,8 @@ pub fn verify_rows(
     Ok(reports)
 }
 
-/// Writes `reports` into their rows of `manifest` (matched by `beta`), keeps the served levels monotone in
-/// `beta`, and reshapes every row's extent and boundary radii at its served level.
+/// Writes `reports` into their rows of `manifest` (matched by `beta`), keeps the bounds monotone in `beta`,
+/// and reshapes every row's extent and boundary radii at its set level.
 pub fn apply_reports(
     evaluator: &Evaluator,
     manifest: &mut Manifest,
@@ -642,11 +642,11 @@ pub fn apply_reports(
         row.verification = Some(report.verification.clone());
     }
     monotone_envelope(manifest)?;
-    reshape_at_served_levels(evaluator, system, &mut manifest.teb_table, &TebOptions::default())
+    reshape_at_set_levels(evaluator, system, &mut manifest.teb_table, &TebOptions::default())
         .map_err(VerifyError::Shape)
 }
 
-/// Keeps served levels monotone in `beta` (the manifest's invariant): a verified row serves at least what
+/// Keeps the bounds monotone in `beta` (the manifest's invariant): a verified row bounds at least what
 /// every row below it serves. An unverified row that would then serve less than a row below it is an error:
 /// verify the rows above a raised one too.
 fn monotone_envelope(manifest: &mut Manifest) -> Result<(), VerifyError> {
@@ -660,7 +660,7 @@ fn monotone_envelope(manifest: &mut Manifest) -> Result<(), VerifyError> {
                 row.beta, row.level
             )));
         }
-        floor = floor.max(row.served_level());
+        floor = floor.max(row.bound());
     }
     Ok(())
 }

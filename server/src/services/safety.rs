@@ -30,7 +30,7 @@ pub struct Safety {
     pub draining: tokio::sync::watch::Receiver<bool>,
 }
 
-/// `count` points on the boundary of a 2-D error set, radii interpolated linearly in angle between the
+/// `count` points on the boundary of a 2-D certified set, radii interpolated linearly in angle between the
 /// stored directions, counter-clockwise from angle 0.
 fn boundary_points(row: &TebRow, n_error: usize, count: usize) -> Result<Vec<f64>, Status> {
     let radii = &row.boundary_radii;
@@ -81,8 +81,8 @@ impl Safety {
             boundary_points(row, n_error, req.boundary_points as usize)?
         };
         Ok(Response::new(pb::GetTrackingErrorBoundResponse {
-            level: row.served_level(),
-            radius: row.served_level(),
+            level: row.set_level(),
+            radius: row.bound(),
             extent: row.extent.clone(),
             table_beta: row.beta,
             boundary,

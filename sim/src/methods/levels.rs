@@ -57,7 +57,7 @@ impl LevelPlanner {
             start: self.planner,
             goal: self.context.world.goal,
             obstacles: &self.obstacles,
-            inflation: self.levels[level].level,
+            inflation: self.levels[level].bound,
             bounds: self.context.world.bounds(),
         };
         Ok(self.path_planner.plan(&request)?.into_iter().skip(1).collect())
@@ -128,7 +128,7 @@ impl LevelPlanner {
             control,
             planner: Some(p_next),
             beta: Some(self.levels[self.current].beta),
-            bound: Some(self.levels[self.current].level),
+            bound: Some(self.levels[self.current].bound),
             replanned,
             reset: false,
             held: false,

@@ -128,14 +128,14 @@ class SpeedRow:
 
     beta: float
     """Planner speed bound ``beta``."""
-    level: float
-    """The served level of the row's error set: the TEB radius at ``beta``."""
+    bound: float
+    """The row's tracking error bound: the TEB radius at ``beta``, metres."""
 
     @classmethod
     def of(cls, row: models_pb2.TebRow) -> SpeedRow:
-        """The row of a ``GetModel`` table. ``TebRow.level`` is already the served level (the server fills
-        it with ``max(learned level, verified level)``), as the Rust ``SpeedRow::from`` reads it."""
-        return cls(beta=row.beta, level=row.level)
+        """The row of a ``GetModel`` table, as the Rust ``SpeedRow::from`` reads it: the speed rule needs
+        the bound; membership (``TebRow.set_level``) is the server's ``in_teb``."""
+        return cls(beta=row.beta, bound=row.bound)
 
 
 def speed_rows(info: models_pb2.ModelInfo) -> list[SpeedRow]:
@@ -165,17 +165,17 @@ class PlannerSpeed:
 def query_planner_control(rows: Sequence[SpeedRow], d_obs: float | None) -> PlannerSpeed:
     """queryPlannerControl: with no obstacle sensed (``d_obs`` None) the fastest row; otherwise, if the sTEB
     radius exceeds ``d_obs / 2``, the slowest row (``beta_l``), else the largest ``beta`` whose radius is at
-    most ``d_obs / 2``. ``rows`` must be non-empty, sorted by ``beta``, with monotone levels (as ``GetModel``
+    most ``d_obs / 2``. ``rows`` must be non-empty, sorted by ``beta``, with monotone bounds (as ``GetModel``
     gives them)."""
-    steb_radius = rows[0].level
+    steb_radius = rows[0].bound
     if d_obs is None:
         row = len(rows) - 1
     else:
-        row = next((i for i in range(len(rows) - 1, -1, -1) if rows[i].level <= d_obs / 2.0), 0)
+        row = next((i for i in range(len(rows) - 1, -1, -1) if rows[i].bound <= d_obs / 2.0), 0)
     return PlannerSpeed(
         beta=rows[row].beta,
         row=row,
-        dteb_radius=rows[row].level,
+        dteb_radius=rows[row].bound,
         steb_radius=steb_radius,
         steb_exceeds_half_distance=d_obs is not None and steb_radius > d_obs / 2.0,
     )
@@ -445,7 +445,8 @@ class StepReport:
     value: float
     """``V(r_next; beta_query)``."""
     in_teb: bool
-    """``r_next`` lies inside ``dTEBmax`` (``V <= level``)."""
+    """``r_next`` lies in the certified set of ``beta_query`` (``V <= TebRow.set_level``), from which
+    ``dTEBmax`` holds."""
     in_domain: bool
     """``r_next`` lies inside the model's trained domain (False: treat the control as unsupported)."""
     round_trips: int
@@ -744,7 +745,7 @@ class OnlineLoop:
             d_obs=d_obs,
             beta_old=beta_old,
             beta_query=row.beta,
-            dteb_radius=row.level,
+            dteb_radius=row.bound,
             steb_radius=speed.steb_radius,
             replanned=replanned,
             branch="hold",

@@ -36,15 +36,17 @@ class TrackingErrorBound:
     """The tracking error bound (TEB) of a planner speed bound."""
 
     level: float
-    """Level of the error set {r : V(r; beta) <= level}, metres: it bounds the tracking error."""
+    """Level of the certified set {r : V(r; beta) <= level} (``TebRow.set_level``): the relative states the
+    bound holds from; ``in_teb`` is membership in it."""
     radius: float
-    """Radius of a ball holding the error set (equal to ``level``), metres."""
+    """The tracking error bound (``TebRow.bound``), metres: from inside the certified set the error stays
+    within it."""
     extent: Floats
-    """Half-widths of the error set's bounding box along each error coordinate, metres, shape [n_error]."""
+    """Half-widths of the certified set's bounding box along each error coordinate, metres, shape [n_error]."""
     table_beta: float
     """The TEB-table beta that answered (>= the beta asked for), m/s."""
     boundary: Floats
-    """Points on the error set's boundary (error coordinates), shape [boundary_points, n_error], metres."""
+    """Points on the certified set's boundary (error coordinates), shape [boundary_points, n_error], metres."""
     model_version: int
     """The model version that answered."""
 
