@@ -20,7 +20,7 @@ use fastrack_grid::grid::Grid;
 use fastrack_grid::solver::{solve, Solution, SolverConfig};
 use fastrack_grid::verify::{
     required_samples, verify_rows, verify_table, Outcome, RowReport, SearchOptions, Selection, Tracker, VerifyError,
-    VerifyOptions,
+    VerifyOptions, FALSIFICATION, UNIFORM, ZERO_ERROR_SLICE,
 };
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::manifest::{Manifest, NetworkInfo, Provenance, SystemInfo, TebRow, MIN_TEB_ROWS, SCHEMA_VERSION};
@@ -285,6 +285,15 @@ fn a_correct_table_passes_at_the_shipped_settings() {
     assert!(v.verified_level <= 1.04 * level, "verified level {} vs {level}", v.verified_level);
     // The rollouts did push the error out towards the level: the check has teeth.
     assert!(v.verified_level > 0.9 * level, "rollouts reached only {} of level {level}", v.verified_level);
+    // Where robots are: the zero-error slice with its own N, then the falsification over start states from
+    // the starts both pushed furthest, which climbs from their errors and never reports less.
+    let names: Vec<&str> = v.checks.iter().map(|c| c.distribution.as_str()).collect();
+    assert_eq!(names, [UNIFORM, ZERO_ERROR_SLICE, FALSIFICATION]);
+    let [uniform, slice, falsification] = [&v.checks[0], &v.checks[1], &v.checks[2]];
+    assert_eq!((uniform.samples, slice.samples), (29_632, 29_632));
+    assert!(v.checks.iter().all(|c| c.violations == 0), "{:?}", v.checks);
+    assert!(falsification.samples > 0 && falsification.max_error >= uniform.max_error.max(slice.max_error));
+    assert_eq!(v.verified_level, v.checks.iter().map(|c| c.max_error).fold(0.0, f64::max));
 }
 
 #[test]
@@ -301,6 +310,9 @@ fn a_shrunk_table_is_flagged_at_the_shipped_settings() {
         first.violations,
         first.samples
     );
+    // A check after a broken one does not run.
+    assert_eq!(first.checks.len(), 1, "{:?}", first.checks);
+    assert_eq!((first.checks[0].distribution.as_str(), first.checks[0].violations), (UNIFORM, first.violations));
     // A value scaled down everywhere has no self-consistent level: every round's set reaches errors 1 / SHRINK
     // times its level, until the set leaves the trained domain. The row is flagged, never verified.
     assert_ne!(report.outcome, Outcome::Verified, "{:?}", report.rounds);

@@ -87,5 +87,15 @@ fn verification(v: &fastrack_valuefn::manifest::Verification) -> pb::Verificatio
                 max_error: p.max_error,
             })
             .collect(),
+        checks: v
+            .checks
+            .iter()
+            .map(|c| pb::VerificationCheck {
+                distribution: c.distribution.clone(),
+                samples: c.samples as u64,
+                violations: c.violations as u64,
+                max_error: c.max_error,
+            })
+            .collect(),
     }
 }

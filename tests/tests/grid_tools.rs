@@ -98,6 +98,15 @@ async fn compare_and_verify_read_a_diagonal_bundle() {
         assert_eq!(got.sampled_level, want.sampled_level);
         assert!(got.sampled_level.is_some());
         assert_eq!(got.correction, "set");
+        let checks: Vec<(&str, u64, u64, f64)> =
+            got.checks.iter().map(|c| (c.distribution.as_str(), c.samples, c.violations, c.max_error)).collect();
+        let wanted: Vec<(&str, u64, u64, f64)> = want
+            .checks
+            .iter()
+            .map(|c| (c.distribution.as_str(), c.samples as u64, c.violations as u64, c.max_error))
+            .collect();
+        assert_eq!(checks, wanted);
+        assert_eq!(checks[0].0, "uniform", "{checks:?}");
         let families: Vec<&str> = got.planners.iter().map(|p| p.family.as_str()).collect();
         assert_eq!(families, ["model-worst-case", "search"], "no random planners were asked for");
         for (g, w) in got.planners.iter().zip(&want.planners) {

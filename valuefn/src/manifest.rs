@@ -262,6 +262,26 @@ pub struct Verification {
     /// The planner families of the final round, with the largest error each forced.
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub planners: Vec<PlannerResult>,
+    /// The checks of the final round, each with its own start states: `uniform` (the set), and where they
+    /// ran `zero-error-slice` and `falsification`. The row is verified only when every check holds.
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub checks: Vec<CheckResult>,
+}
+
+/// One check of a verification round: where its start states came from and what they reached.
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct CheckResult {
+    /// `uniform` (uniform states of the certified set), `zero-error-slice` (uniform states of its slice with
+    /// every error coordinate at 0, where starts and planner resets put a robot; 0 samples: the set holds
+    /// none) or `falsification` (a search over start states of the set towards the largest error).
+    pub distribution: String,
+    /// States rolled out (rollouts, for the falsification).
+    pub samples: usize,
+    /// Those whose error exceeded the round's level (with its slack).
+    pub violations: usize,
+    /// The largest tracking error reached.
+    pub max_error: f64,
 }
 
 fn one_round() -> usize {

@@ -99,6 +99,7 @@ fn each_invariant_names_its_field() {
         correction: Some("bound".into()),
         rounds: 1,
         planners: Vec::new(),
+        checks: Vec::new(),
     });
     assert!(field_error(m).starts_with("teb_table[3]: verification.sampled_level must be finite and > 0"));
     let mut m = manifest();
@@ -165,6 +166,7 @@ fn verified(row: &TebRow, sampled: f64, verified: f64, correction: &str) -> TebR
             correction: Some(correction.into()),
             rounds: 2,
             planners: Vec::new(),
+            checks: Vec::new(),
         }),
         ..row.clone()
     }

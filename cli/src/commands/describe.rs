@@ -107,14 +107,22 @@ fn verification_json(v: &pb::Verification) -> Value {
     json!({"eps": v.eps, "delta": v.delta, "samples": v.samples, "violations": v.violations, "rounds": v.rounds,
         "sampled_level": v.sampled_level, "correction": v.correction, "horizon": v.horizon, "step": v.step,
         "planners": v.planners.iter().map(|p| json!({"family": p.family, "rollouts": p.rollouts,
-            "max_error": p.max_error})).collect::<Vec<_>>()})
+            "max_error": p.max_error})).collect::<Vec<_>>(),
+        "checks": v.checks.iter().map(|c| json!({"distribution": c.distribution, "samples": c.samples,
+            "violations": c.violations, "max_error": c.max_error})).collect::<Vec<_>>()})
 }
 
-/// `eps 0.001, delta 1e-6, N 29632, 0 violations, 2 rounds (set), 10 s; hardest model-worst-case`.
+/// `eps 0.001, delta 1e-6, N 29632, 0 violations, 2 rounds (set), 10 s; hardest model-worst-case`, then where
+/// they were recorded `; checks <distribution> <samples>/<violations>/<largest error>, ...`.
 fn verification_text(v: &pb::Verification) -> String {
     let hardest = v.planners.iter().max_by(|a, b| a.max_error.total_cmp(&b.max_error));
+    let checks: Vec<String> = v
+        .checks
+        .iter()
+        .map(|c| format!("{} {}/{}/{:.4}", c.distribution, c.samples, c.violations, c.max_error))
+        .collect();
     format!(
-        "eps {}, delta {}, N {}, {} violations, {} rounds{}, {} s{}",
+        "eps {}, delta {}, N {}, {} violations, {} rounds{}, {} s{}{}",
         v.eps,
         v.delta,
         v.samples,
@@ -122,6 +130,7 @@ fn verification_text(v: &pb::Verification) -> String {
         v.rounds,
         if v.correction.is_empty() { String::new() } else { format!(" ({})", v.correction) },
         v.horizon,
-        hardest.map_or(String::new(), |p| format!("; hardest {}", p.family))
+        hardest.map_or(String::new(), |p| format!("; hardest {}", p.family)),
+        if checks.is_empty() { String::new() } else { format!("; checks {}", checks.join(", ")) }
     )
 }

@@ -6,8 +6,8 @@ use anyhow::Context;
 use fastrack_grid::format;
 use fastrack_grid::solver::Solution;
 use fastrack_grid::verify::{
-    apply_reports, required_samples, verify_rows, Batching, Correction, RowReport, SearchOptions, Selection, Tracker,
-    VerifyOptions,
+    apply_reports, required_samples, verify_rows, Batching, Correction, FalsificationOptions, RowReport, SearchOptions,
+    Selection, Tracker, VerifyOptions,
 };
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::manifest::{Manifest, TebRow};
@@ -107,6 +107,24 @@ pub struct Args {
     /// Samples searched per batch: those the other planner families pushed furthest.
     #[arg(long, default_value_t = 64)]
     search_per_batch: usize,
+    /// Skip the zero-error slice check (uniform states of each round's set with every error coordinate at 0,
+    /// as many as the uniform check).
+    #[arg(long)]
+    no_zero_error_slice: bool,
+    /// Starts of the falsification search over start states: the samples the other checks pushed furthest
+    /// (0: no falsification).
+    #[arg(long, default_value_t = 64)]
+    falsification_starts: usize,
+    /// Proposals per start and iteration of the falsification.
+    #[arg(long, default_value_t = 16)]
+    falsification_population: usize,
+    /// Iterations of the falsification.
+    #[arg(long, default_value_t = 4)]
+    falsification_iterations: usize,
+    /// Half-width of the falsification's first proposal box around a start, as a share of each coordinate's
+    /// width in the trained domain (halved every iteration).
+    #[arg(long, default_value_t = 0.05)]
+    falsification_scale: f64,
     /// Samples rolled out together; a round ends after the first batch with a violation.
     #[arg(long, default_value_t = 4096)]
     batch: usize,
@@ -258,6 +276,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             smoothing: args.search_smoothing,
             per_batch: args.search_per_batch,
         },
+        zero_error_slice: !args.no_zero_error_slice,
+        falsification: FalsificationOptions {
+            starts: args.falsification_starts,
+            population: args.falsification_population,
+            iterations: args.falsification_iterations,
+            scale: args.falsification_scale,
+        },
         batch: args.batch,
         batching: Batching { chunk: args.chunk, parallel: !args.sequential },
         tracker,
@@ -350,6 +375,7 @@ fn finish(
         "set level",
         "bound",
         "violations / N",
+        "checks: N / violations / max l",
         "hardest planner",
         "max l per planner",
         "searched",
@@ -383,6 +409,11 @@ fn finish(
             set_level,
             bound,
             format!("{} / {}", v.violations, v.samples),
+            v.checks
+                .iter()
+                .map(|c| format!("{} {} / {} / {:.4}", c.distribution, c.samples, c.violations, c.max_error))
+                .collect::<Vec<_>>()
+                .join("; "),
             v.hardest_planner().map_or_else(String::new, |p| p.family.clone()),
             per_planner.join("; "),
             format!("{}", r.searched),

@@ -7,7 +7,11 @@
 //! gradient, the worst-case planner of a grid solution's gradient (where one is given near the row's `beta`),
 //! random bang-bang planners, and a cross-entropy search over planner schedules ([`search`]) from the samples
 //! of each batch the others pushed furthest. A sample *violates* the round when its error exceeds
-//! `(1 + slack) c`. The first round samples under `(1 + margin) level`, or under the level whose set holds a
+//! `(1 + slack) c`. Once a round's uniform samples hold, the same set is checked where robots are: uniform
+//! samples of its zero-error slice (error coordinates at 0, where starts and planner resets put a robot) and
+//! a falsification search over start states ([`falsify`]) from the samples both pushed furthest; a violation
+//! in either ends the round as one in the uniform samples does. The first round samples under
+//! `(1 + margin) level`, or under the level whose set holds a
 //! given share of the proposal box where that is higher; a round with a violation ends there, the level is
 //! raised to the largest error seen, and the next round samples afresh, until a round rolls out all `N`
 //! samples without a violation. A row whose rounds run out, or whose raised level would take the set past the trained domain's
@@ -22,15 +26,17 @@
 //! samples it starts from are chosen by the other families' errors, so the guarantee is stated for them.
 
 mod batch;
+mod falsify;
 mod sampling;
 mod search;
 
 pub use batch::Batching;
+pub use falsify::FalsificationOptions;
 pub use search::SearchOptions;
 
 use crate::solver::Solution;
 use batch::{Gradient, Rollout, Scene};
-use fastrack_valuefn::manifest::{Manifest, PlannerResult, TebRow, Verification};
+use fastrack_valuefn::manifest::{CheckResult, Manifest, PlannerResult, TebRow, Verification};
 use fastrack_valuefn::runtime::{Evaluator, RuntimeError};
 use fastrack_valuefn::shard::Shard;
 use fastrack_valuefn::simulation::Planner;
@@ -107,6 +113,12 @@ pub struct VerifyOptions {
     pub mean_dwell: f64,
     /// The cross-entropy search over planner schedules.
     pub search: SearchOptions,
+    /// Also sample the zero-error slice of each round's set (as many samples as the uniform check).
+    #[serde(default = "yes")]
+    pub zero_error_slice: bool,
+    /// The falsification search over start states.
+    #[serde(default)]
+    pub falsification: FalsificationOptions,
     /// Samples rolled out together (each round checks for violations after every such batch).
     pub batch: usize,
     /// How the rollouts are fed to ONNX Runtime.
@@ -141,6 +153,8 @@ impl Default for VerifyOptions {
             random_planners: 2,
             mean_dwell: 1.0,
             search: SearchOptions::default(),
+            zero_error_slice: true,
+            falsification: FalsificationOptions::default(),
             batch: 4096,
             batching: Batching::default(),
             proposal_box: 2.5,
@@ -238,7 +252,17 @@ pub struct RoundReport {
     pub max_error: f64,
     /// Share of the proposals accepted by rejection sampling.
     pub acceptance: f64,
+    /// Each check of the round in the order it ran (a check after one with a violation does not run).
+    #[serde(default)]
+    pub checks: Vec<CheckResult>,
 }
+
+/// The check of uniform samples of the round's set.
+pub const UNIFORM: &str = "uniform";
+/// The check of uniform samples of the set's zero-error slice.
+pub const ZERO_ERROR_SLICE: &str = "zero-error-slice";
+/// The falsification search over start states.
+pub const FALSIFICATION: &str = "falsification";
 
 /// How the level correction of a row ended.
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
@@ -318,7 +342,12 @@ fn check(options: &VerifyOptions) -> Result<(), VerifyError> {
             options.proposal_box
         )));
     }
-    options.search.check()
+    options.search.check()?;
+    options.falsification.check()
+}
+
+fn yes() -> bool {
+    true
 }
 
 /// The grid solution among `adversaries` nearest the row's `beta`, if one lies within `tolerance` of it.
@@ -364,16 +393,113 @@ struct Round {
     rollout_steps: u64,
 }
 
-/// One round with errors checked against `level`: batches of samples rolled out until `n` are done or a batch
-/// has a violation.
+/// What the samples of one sampled check reached.
+struct Sampled {
+    check: CheckResult,
+    acceptance: f64,
+    /// The starts whose errors were largest, row-major, with those errors (largest first).
+    worst: (Vec<f64>, Vec<f64>),
+}
+
+/// One round with errors checked against `level`: the uniform samples of the round's set, then (if they held)
+/// the samples of its zero-error slice, then (if those held) the falsification search from the starts both
+/// pushed furthest. Each check rolls out batches until its samples are done or a batch has a violation.
+#[allow(clippy::too_many_arguments)]
 fn run_round(
     scene: &Scene<'_>,
-    sampler: &mut SublevelSampler<'_>,
+    sampler: SublevelSampler<'_>,
+    domain: (&[f64], &[f64]),
     level: f64,
     n: usize,
     options: &VerifyOptions,
     rng: &mut StdRng,
 ) -> Result<Round, VerifyError> {
+    let (mut tally, mut searched, mut rollout_steps) = (FamilyTally::default(), 0, 0u64);
+    let sampled_level = sampler.level();
+    let limit = (1.0 + options.slack) * level;
+    let mut uniform_sampler = sampler;
+    let uniform = run_samples(scene, &mut uniform_sampler, UNIFORM, level, n, options, rng, &mut tally)?;
+    searched += uniform.searched;
+    rollout_steps += uniform.rollout_steps;
+    let acceptance = uniform.sampled.acceptance;
+    let mut checks = vec![uniform.sampled.check.clone()];
+    let mut worst = vec![uniform.sampled.worst];
+    if options.zero_error_slice && checks[0].violations == 0 {
+        let mut slice_sampler = uniform_sampler.on_zero_error_slice(scene.system);
+        match run_samples(scene, &mut slice_sampler, ZERO_ERROR_SLICE, level, n, options, rng, &mut tally) {
+            Ok(slice) => {
+                searched += slice.searched;
+                rollout_steps += slice.rollout_steps;
+                checks.push(slice.sampled.check);
+                worst.push(slice.sampled.worst);
+            }
+            // A set that holds (almost) no zero-error state: nothing to roll out, and the report says so.
+            Err(VerifyError::Sampling { .. }) => checks.push(CheckResult {
+                distribution: ZERO_ERROR_SLICE.into(),
+                samples: 0,
+                violations: 0,
+                max_error: 0.0,
+            }),
+            Err(e) => return Err(e),
+        }
+    }
+    if options.falsification.enabled() && checks.iter().all(|c| c.violations == 0) {
+        let (starts, reached) = worst_starts(&worst, scene.system.n_state(), options.falsification.starts);
+        let found = falsify::falsify(scene, &starts, &reached, sampled_level, domain, &options.falsification, rng)?;
+        let steps_per_rollout = (options.horizon / options.step).round().max(1.0) as u64;
+        rollout_steps += found.rollouts as u64 * steps_per_rollout;
+        checks.push(CheckResult {
+            distribution: FALSIFICATION.into(),
+            samples: found.rollouts,
+            violations: found.errors.iter().filter(|&&e| e > limit).count(),
+            max_error: found.errors.iter().copied().fold(0.0, f64::max),
+        });
+    }
+    Ok(Round {
+        report: RoundReport {
+            level,
+            sampled_level,
+            samples: checks[0].samples,
+            violations: checks.iter().map(|c| c.violations).sum(),
+            max_error: checks.iter().map(|c| c.max_error).fold(0.0, f64::max),
+            acceptance,
+            checks,
+        },
+        tally,
+        searched,
+        rollout_steps,
+    })
+}
+
+/// The `count` starts with the largest errors among the checks' worst starts, row-major, with their errors.
+fn worst_starts(worst: &[(Vec<f64>, Vec<f64>)], n_state: usize, count: usize) -> (Vec<f64>, Vec<f64>) {
+    let mut all: Vec<(f64, &[f64])> =
+        worst.iter().flat_map(|(states, errors)| errors.iter().copied().zip(states.chunks(n_state))).collect();
+    all.sort_by(|a, b| b.0.total_cmp(&a.0));
+    all.truncate(count);
+    (all.iter().flat_map(|(_, s)| s.to_vec()).collect(), all.iter().map(|(e, _)| *e).collect())
+}
+
+/// A sampled check's result and what it cost.
+struct SampledRun {
+    sampled: Sampled,
+    searched: usize,
+    rollout_steps: u64,
+}
+
+/// One sampled check: batches of samples rolled out against every planner family until `n` are done or a
+/// batch has a violation of `level`.
+#[allow(clippy::too_many_arguments)]
+fn run_samples(
+    scene: &Scene<'_>,
+    sampler: &mut SublevelSampler<'_>,
+    distribution: &str,
+    level: f64,
+    n: usize,
+    options: &VerifyOptions,
+    rng: &mut StdRng,
+    tally: &mut FamilyTally,
+) -> Result<SampledRun, VerifyError> {
     let system = scene.system;
     let n_state = system.n_state();
     let steps_per_rollout = (options.horizon / options.step).round().max(1.0) as u64;
@@ -383,7 +509,8 @@ fn run_round(
     }
     families.extend(std::iter::repeat_n(Family::RandomBangBang, options.random_planners));
     let (mut done, mut violations, mut max_error, mut searched, mut rollout_steps) = (0, 0, 0.0f64, 0, 0u64);
-    let mut tally = FamilyTally::default();
+    let keep = options.falsification.starts;
+    let mut worst: Vec<(f64, Vec<f64>)> = Vec::new();
     while done < n && violations == 0 {
         let count = options.batch.min(n - done);
         let samples = sampler.draw(count, rng)?;
@@ -426,18 +553,18 @@ fn run_round(
         }
         violations += errors.iter().filter(|&&e| e > (1.0 + options.slack) * level).count();
         max_error = errors.iter().copied().fold(max_error, f64::max);
+        worst.extend(errors.iter().zip(samples.chunks(n_state)).map(|(&e, s)| (e, s.to_vec())));
+        worst.sort_by(|a, b| b.0.total_cmp(&a.0));
+        worst.truncate(keep);
         done += count;
     }
-    Ok(Round {
-        report: RoundReport {
-            level,
-            sampled_level: sampler.level(),
-            samples: done,
-            violations,
-            max_error,
+    let (errors, states): (Vec<f64>, Vec<Vec<f64>>) = worst.into_iter().unzip();
+    Ok(SampledRun {
+        sampled: Sampled {
+            check: CheckResult { distribution: distribution.into(), samples: done, violations, max_error },
             acceptance: sampler.acceptance(),
+            worst: (states.concat(), errors),
         },
-        tally,
         searched,
         rollout_steps,
     })
@@ -499,12 +626,13 @@ pub fn verify_row(
         .map(|&i| manifest.state[i].min.abs().min(manifest.state[i].max.abs()))
         .fold(f64::INFINITY, f64::min);
     let first_level = level;
+    let (domain_lo, domain_hi): (Vec<f64>, Vec<f64>) = manifest.state.iter().map(|d| (d.min, d.max)).unzip();
     let (last, outcome) = loop {
         let sampled_level = match options.correction {
             Correction::Set => level,
             Correction::Bound => first_level,
         };
-        let mut sampler = SublevelSampler::new(
+        let sampler = SublevelSampler::new(
             evaluator,
             manifest,
             system,
@@ -513,7 +641,7 @@ pub fn verify_row(
             options.proposal_box,
             options.max_proposals,
         );
-        let round = run_round(&scene, &mut sampler, level, n, options, &mut rng)?;
+        let round = run_round(&scene, sampler, (&domain_lo, &domain_hi), level, n, options, &mut rng)?;
         tracing::info!(
             beta = row.beta,
             level,
@@ -549,6 +677,7 @@ pub fn verify_row(
             correction: Some(options.correction.name().into()),
             rounds: rounds.len(),
             planners: last.tally.results(),
+            checks: last.report.checks.clone(),
         },
         rounds,
         outcome,

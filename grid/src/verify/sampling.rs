@@ -1,4 +1,4 @@
-//! Uniform samples of a learned sublevel set `{V <= level}` by rejection from a box.
+//! Uniform samples of a learned sublevel set `{V <= level}` by rejection from a box, or of its zero-error slice.
 //!
 //! The box is the manifest's state box with each error coordinate narrowed to `[-w, w]`, `w = factor level`:
 //! since `V >= l` for a value function of the tracking error, the set lies within `|e| <= level` and the
@@ -72,6 +72,16 @@ impl<'a> SublevelSampler<'a> {
             accepted: 0,
             max_proposals,
         }
+    }
+
+    /// The same sampler on the zero-error slice: every error coordinate pinned at 0 (the tracker on the
+    /// planner, where a start or a planner reset puts a robot), the others uniform over the box.
+    pub fn on_zero_error_slice(mut self, system: &AffineSystem) -> Self {
+        for &i in &system.error_coords {
+            (self.lo[i], self.hi[i]) = (0.0, 0.0);
+        }
+        self.narrowed.clear();
+        self
     }
 
     /// The level sampled under.
