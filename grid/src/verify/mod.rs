@@ -404,28 +404,25 @@ struct Sampled {
 /// One round with errors checked against `level`: the uniform samples of the round's set, then (if they held)
 /// the samples of its zero-error slice, then (if those held) the falsification search from the starts both
 /// pushed furthest. Each check rolls out batches until its samples are done or a batch has a violation.
-#[allow(clippy::too_many_arguments)]
 fn run_round(
     scene: &Scene<'_>,
-    sampler: SublevelSampler<'_>,
+    mut sampler: SublevelSampler<'_>,
     domain: (&[f64], &[f64]),
     level: f64,
     n: usize,
     options: &VerifyOptions,
     rng: &mut StdRng,
 ) -> Result<Round, VerifyError> {
-    let (mut tally, mut searched, mut rollout_steps) = (FamilyTally::default(), 0, 0u64);
+    let mut tally = FamilyTally::default();
     let sampled_level = sampler.level();
     let limit = (1.0 + options.slack) * level;
-    let mut uniform_sampler = sampler;
-    let uniform = run_samples(scene, &mut uniform_sampler, UNIFORM, level, n, options, rng, &mut tally)?;
-    searched += uniform.searched;
-    rollout_steps += uniform.rollout_steps;
-    let acceptance = uniform.sampled.acceptance;
-    let mut checks = vec![uniform.sampled.check.clone()];
-    let mut worst = vec![uniform.sampled.worst];
+    let SampledRun { sampled, mut searched, mut rollout_steps } =
+        run_samples(scene, &mut sampler, UNIFORM, level, n, options, rng, &mut tally)?;
+    let acceptance = sampled.acceptance;
+    let mut checks = vec![sampled.check];
+    let mut worst = vec![sampled.worst];
     if options.zero_error_slice && checks[0].violations == 0 {
-        let mut slice_sampler = uniform_sampler.on_zero_error_slice(scene.system);
+        let mut slice_sampler = sampler.on_zero_error_slice(scene.system);
         match run_samples(scene, &mut slice_sampler, ZERO_ERROR_SLICE, level, n, options, rng, &mut tally) {
             Ok(slice) => {
                 searched += slice.searched;

@@ -74,13 +74,15 @@ impl<'a> SublevelSampler<'a> {
         }
     }
 
-    /// The same sampler on the zero-error slice: every error coordinate pinned at 0 (the tracker on the
-    /// planner, where a start or a planner reset puts a robot), the others uniform over the box.
+    /// The same set's sampler on its zero-error slice: every error coordinate pinned at 0 (the tracker on the
+    /// planner, where a start or a planner reset puts a robot), the others uniform over the box; its counts
+    /// start afresh.
     pub fn on_zero_error_slice(mut self, system: &AffineSystem) -> Self {
         for &i in &system.error_coords {
             (self.lo[i], self.hi[i]) = (0.0, 0.0);
         }
         self.narrowed.clear();
+        (self.proposed, self.accepted) = (0, 0);
         self
     }
 
