@@ -7,8 +7,9 @@
 //! 3. replans the raw path around the obstacles inflated by the sTEB when an obstacle is newly sensed or the
 //!    replan flag is set;
 //! 4. adjusts the planner (adjustPlannerControl): when `beta_query < beta_old`, keeps `p*`, the raw-path
-//!    state closest to the tracker, if `s - Q p*` lies inside `dTEBmax`, else resets the planner to a free
-//!    point of the inflated map with `s - Q p` inside `dTEBmax` and flags a replan, else (no such point: the
+//!    state closest to the tracker, if `s - Q p*` lies in the certified set of `beta_query` (the server's
+//!    `in_teb`, `V <= set level`: where `dTEBmax` holds), else resets the planner to a free point of the
+//!    inflated map with `s - Q p` in that set and flags a replan, else (no such point: the
 //!    tracker's speed or heading lies outside the smaller set) holds: the planner waits where it is with
 //!    `beta_old` and its bound still in force, and the drop is tried again at the next step; otherwise moves
 //!    the planner along the raw path for one control period at per-axis speed at most `beta_query`;
@@ -54,13 +55,13 @@ pub struct LoopSettings {
 pub enum Branch {
     /// `beta_query >= beta_old`: the planner moved along the raw path.
     Advance,
-    /// `beta_query < beta_old` and `s - Q p*` inside `dTEBmax`: the planner jumped to `p*`.
+    /// `beta_query < beta_old` and `s - Q p*` in the certified set of `beta_query`: the planner jumped to `p*`.
     Keep,
-    /// `beta_query < beta_old` and `s - Q p*` outside `dTEBmax`: the planner was reset, a replan flagged.
+    /// `beta_query < beta_old` and `s - Q p*` outside that set: the planner was reset into it, a replan flagged.
     Reset,
-    /// `beta_query < beta_old` and no free planner state within `dTEBmax` of the tracker inside it: the
-    /// planner waits where it is (a planner at rest obeys every speed bound), `beta_old` and its bound stay
-    /// in force, and the drop is tried again at the next step.
+    /// `beta_query < beta_old` and no free planner state within `dTEBmax` of the tracker puts `s - Q p` in
+    /// that set: the planner waits where it is (a planner at rest obeys every speed bound), `beta_old` and its
+    /// bound stay in force, and the drop is tried again at the next step.
     Hold,
 }
 
@@ -89,7 +90,7 @@ pub struct StepReport {
     pub relative_state: Vec<f64>,
     /// `V(r_next; beta_query)`.
     pub value: f64,
-    /// `r_next` lies inside `dTEBmax` (`V <= level`).
+    /// `r_next` lies in the certified set of `beta_query` (`V <= set level`), from which `dTEBmax` holds.
     pub in_teb: bool,
     /// `r_next` lies inside the model's trained domain.
     pub in_domain: bool,
@@ -326,8 +327,8 @@ impl OnlineLoop {
             .unwrap_or((0, self.planner))
     }
 
-    /// A free planner state with `s - Q p` inside `dTEBmax` and the trained domain, if there is one among the
-    /// candidates: the tracker's own position first, then points drawn uniformly in the disc of radius
+    /// A free planner state with `s - Q p` in the certified set and the trained domain, if there is one among
+    /// the candidates: the tracker's own position first, then points drawn uniformly in the disc of radius
     /// `dTEBmax` around it, the free ones asked about in one `TrackingControl` batch. Also returns the calls
     /// made.
     async fn reset_point(

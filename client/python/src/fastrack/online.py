@@ -11,9 +11,10 @@ Each :meth:`OnlineLoop.step` takes the tracker state and the obstacles sensed no
    replan flag is set (the :class:`RawPathPlanner` of your choice: :class:`GridAStar` by default, or
    :class:`StraightLine`);
 4. adjusts the planner (adjustPlannerControl): when ``beta_query < beta_old``, keeps ``p*``, the state of the
-   planner and its raw path closest to the tracker, if ``s - Q p*`` lies inside ``dTEBmax`` (branch
-   ``"keep"``), else resets the planner to a free point of the inflated map with ``s - Q p`` inside
-   ``dTEBmax`` and flags a replan (branch ``"reset"``), else (no such point: the tracker's speed or heading
+   planner and its raw path closest to the tracker, if ``s - Q p*`` lies in the certified set of
+   ``beta_query`` (the server's ``in_teb``, ``V <= set level``: where ``dTEBmax`` holds; branch ``"keep"``),
+   else resets the planner to a free point of the inflated map with ``s - Q p`` in that set and flags a
+   replan (branch ``"reset"``), else (no such point: the tracker's speed or heading
    lies outside the smaller set) holds: the planner waits where it is with ``beta_old`` and its bound still
    in force, and the drop is tried again at the next step (branch ``"hold"``); otherwise moves the planner
    along the raw path for one control period, each axis at most ``beta_query dt`` (branch ``"advance"``);
@@ -71,10 +72,10 @@ from .v1 import models_pb2
 
 Branch = Literal["advance", "keep", "reset", "hold"]
 """adjustPlannerControl's branch: ``"advance"`` (``beta_query >= beta_old``: the planner moved along the raw
-path), ``"keep"`` (``beta_query < beta_old`` and ``s - Q p*`` inside ``dTEBmax``: the planner jumped to
-``p*``), ``"reset"`` (``s - Q p*`` outside it: the planner was reset to a free point inside it, a replan
-flagged), ``"hold"`` (no free point within ``dTEBmax`` of the tracker inside it: the planner waited where it
-is, ``beta_old`` and its bound still in force)."""
+path), ``"keep"`` (``beta_query < beta_old`` and ``s - Q p*`` in the certified set of ``beta_query``: the
+planner jumped to ``p*``), ``"reset"`` (``s - Q p*`` outside it: the planner was reset to a free point inside
+it, a replan flagged), ``"hold"`` (no free point within ``dTEBmax`` of the tracker puts the relative state in
+it: the planner waited where it is, ``beta_old`` and its bound still in force)."""
 
 
 # --- errors -------------------------------------------------------------------------------------------------
@@ -699,7 +700,7 @@ class OnlineLoop:
         return best
 
     def _reset_point(self, tracker: list[float], position: Point, speed: PlannerSpeed) -> tuple[Point | None, int]:
-        """A free planner state with ``s - Q p`` inside ``dTEBmax`` and the trained domain, if there is one
+        """A free planner state with ``s - Q p`` in the certified set and the trained domain, if there is one
         among the candidates: the tracker's own position first, then points drawn uniformly in the disc of
         radius ``dTEBmax`` around it, the free ones asked about in one ``TrackingControl`` batch. Also returns
         the calls made."""
