@@ -19,8 +19,8 @@
 use fastrack_grid::grid::Grid;
 use fastrack_grid::solver::{solve, Solution, SolverConfig};
 use fastrack_grid::verify::{
-    required_samples, verify_rows, verify_table, Outcome, RowReport, SearchOptions, Selection, Tracker, VerifyError,
-    VerifyOptions, FALSIFICATION, UNIFORM, ZERO_ERROR_SLICE,
+    required_samples, verify_rows, verify_table, Outcome, RecordedStates, RowReport, SearchOptions, Selection, Tracker,
+    VerifyError, VerifyOptions, FALSIFICATION, OPERATIONAL, UNIFORM, ZERO_ERROR_SLICE,
 };
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::manifest::{Manifest, NetworkInfo, Provenance, SystemInfo, TebRow, MIN_TEB_ROWS, SCHEMA_VERSION};
@@ -185,7 +185,7 @@ fn shipped_settings() -> VerifyOptions {
 /// Verifies the `beta_u` row of a bundle of the fitted network scaled by `scale`, level `level`, with the grid
 /// solution's worst-case planner playing.
 fn verify(scale: f64, level: f64) -> RowReport {
-    verify_and_check_shapes(scale, level, ground_truth().0.params[0].max, false)
+    verify_and_check_shapes(scale, level, ground_truth().0.params[0].max, false, None)
 }
 
 /// The evaluator and manifest of a bundle of `network` written with `level` at `beta_u`.
@@ -198,21 +198,33 @@ fn load(system: &AffineSystem, network: &ValueNetwork, level: f64) -> (Evaluator
     (evaluator, bundle)
 }
 
+/// The row at `beta` alone, with no grid adversary and no operational check.
+fn bare_selection(beta: &f64) -> Selection<'_> {
+    Selection { betas: Some(std::slice::from_ref(beta)), ..Selection::default() }
+}
+
 fn rayon_threads() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
 }
 
 /// [`verify`] of the row at `row_beta` (the grid solution nearest it plays it, its inputs scaled to the row's
-/// bound), optionally checking every row's extent against a dense scan (meaningful for a network that
-/// keeps `V >= |x|`, which the error-set measurement relies on; a shrunk one does not).
-fn verify_and_check_shapes(scale: f64, level: f64, row_beta: f64, check_shapes: bool) -> RowReport {
+/// bound), with the operational check of `operational` if given, optionally checking every row's extent
+/// against a dense scan (meaningful for a network that keeps `V >= |x|`, which the error-set measurement
+/// relies on; a shrunk one does not).
+fn verify_and_check_shapes(
+    scale: f64,
+    level: f64,
+    row_beta: f64,
+    check_shapes: bool,
+    operational: Option<&RecordedStates>,
+) -> RowReport {
     let (system, solution) = ground_truth();
     let network = fitted_network(system, solution, scale);
     let (evaluator, bundle) = load(system, &network, level);
     let mut manifest = bundle.manifest.clone();
     let options = shipped_settings();
     let adversaries = std::slice::from_ref(solution);
-    let selection = Selection { betas: Some(&[row_beta]), adversaries, grid_tolerance: 0.1 };
+    let selection = Selection { betas: Some(&[row_beta]), adversaries, grid_tolerance: 0.1, operational };
     let reports =
         verify_table(&evaluator, &mut manifest, system, &selection, &options, &ProgressBar::hidden()).unwrap();
     // The verification lands in the manifest and survives a rewrite of the bundle.
@@ -273,7 +285,19 @@ fn grid_v_min() -> f64 {
 #[test]
 fn a_correct_table_passes_at_the_shipped_settings() {
     let level = LEVEL_FACTOR * grid_v_min();
-    let report = verify_and_check_shapes(1.0, level, ground_truth().0.params[0].max, true);
+    // States a loop might have visited: a lattice over the domain, some of them in the set, most not.
+    let system = &ground_truth().0;
+    let lattice: Vec<String> = (0..=40)
+        .flat_map(|i| (0..=40).map(move |j| (i as f64 / 40.0, j as f64 / 40.0)))
+        .map(|(a, b)| {
+            let (x, v) = (&system.state[0], &system.state[1]);
+            format!("advance,1,{},{}", x.min + a * (x.max - x.min), v.min + b * (v.max - v.min))
+        })
+        .collect();
+    let names: Vec<String> = system.state.iter().map(|d| d.name.to_string()).collect();
+    let text = format!("branch,beta,{}\n{}\n", names.join(","), lattice.join("\n"));
+    let recorded = RecordedStates::parse(&text, &names).unwrap();
+    let report = verify_and_check_shapes(1.0, level, ground_truth().0.params[0].max, true, Some(&recorded));
     let v = &report.verification;
     eprintln!("correct table: level {level:.4}, {report:?}");
     assert_eq!(v.samples, required_samples(1e-3, 1e-6));
@@ -285,14 +309,18 @@ fn a_correct_table_passes_at_the_shipped_settings() {
     assert!(v.verified_level <= 1.04 * level, "verified level {} vs {level}", v.verified_level);
     // The rollouts did push the error out towards the level: the check has teeth.
     assert!(v.verified_level > 0.9 * level, "rollouts reached only {} of level {level}", v.verified_level);
-    // Where robots are: the zero-error slice with its own N, then the falsification over start states from
-    // the starts both pushed furthest, which climbs from their errors and never reports less.
+    // Where robots are: the zero-error slice and the recorded states inside the set, each with its own N,
+    // then the falsification over start states from the starts they pushed furthest, which climbs from their
+    // errors and never reports less.
     let names: Vec<&str> = v.checks.iter().map(|c| c.distribution.as_str()).collect();
-    assert_eq!(names, [UNIFORM, ZERO_ERROR_SLICE, FALSIFICATION]);
-    let [uniform, slice, falsification] = [&v.checks[0], &v.checks[1], &v.checks[2]];
-    assert_eq!((uniform.samples, slice.samples), (29_632, 29_632));
+    assert_eq!(names, [UNIFORM, ZERO_ERROR_SLICE, OPERATIONAL, FALSIFICATION]);
+    let [uniform, slice, operational, falsification] = [&v.checks[0], &v.checks[1], &v.checks[2], &v.checks[3]];
+    assert_eq!((uniform.samples, slice.samples, operational.samples), (29_632, 29_632, 29_632));
     assert!(v.checks.iter().all(|c| c.violations == 0), "{:?}", v.checks);
-    assert!(falsification.samples > 0 && falsification.max_error >= uniform.max_error.max(slice.max_error));
+    // The draws are lattice states inside the set: their errors start at their own |x| <= the level.
+    assert!(operational.max_error > 0.0 && operational.max_error <= 1.04 * level, "{operational:?}");
+    let sampled = [uniform, slice, operational].map(|c| c.max_error).into_iter().fold(0.0, f64::max);
+    assert!(falsification.samples > 0 && falsification.max_error >= sampled);
     assert_eq!(v.verified_level, v.checks.iter().map(|c| c.max_error).fold(0.0, f64::max));
 }
 
@@ -375,7 +403,7 @@ fn the_grid_policy_as_the_tracker_holds_the_weak_models_samples_within_the_grid_
         ..VerifyOptions::default()
     };
     let selection =
-        Selection { betas: Some(&[beta_u]), adversaries: std::slice::from_ref(solution), grid_tolerance: 0.1 };
+        Selection { adversaries: std::slice::from_ref(solution), grid_tolerance: 0.1, ..bare_selection(&beta_u) };
     let run = |tracker| {
         verify_rows(
             &evaluator,
@@ -405,7 +433,7 @@ fn the_grid_policy_as_the_tracker_holds_the_weak_models_samples_within_the_grid_
     assert!(reference_error <= 1.1 * ceiling, "the grid policy reached {reference_error}, its values {ceiling}");
     assert!(weak_error > 1.3 * reference_error, "weak control {weak_error} against the grid policy {reference_error}");
     // Without a grid solution near the row there is no policy to play.
-    let bare = Selection { betas: Some(&[beta_u]), ..Selection::default() };
+    let bare = bare_selection(&beta_u);
     let refused = verify_rows(
         &evaluator,
         &bundle.manifest,
@@ -439,7 +467,7 @@ fn the_search_forces_larger_errors_than_random_planners_on_a_weak_control() {
     };
     let mut manifest = bundle.manifest.clone();
     let beta_u = system.params[0].max;
-    let selection = Selection { betas: Some(&[beta_u]), ..Selection::default() };
+    let selection = bare_selection(&beta_u);
     let report = verify_table(&evaluator, &mut manifest, &system, &selection, &options, &ProgressBar::hidden())
         .unwrap()
         .remove(0);

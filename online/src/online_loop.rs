@@ -51,7 +51,8 @@ pub struct LoopSettings {
 }
 
 /// Which branch of adjustPlannerControl a step took.
-#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+#[derive(Debug, Clone, Copy, PartialEq, Eq, serde::Serialize, serde::Deserialize)]
+#[serde(rename_all = "kebab-case")]
 pub enum Branch {
     /// `beta_query >= beta_old`: the planner moved along the raw path.
     Advance,
@@ -63,6 +64,18 @@ pub enum Branch {
     /// that set: the planner waits where it is (a planner at rest obeys every speed bound), `beta_old` and its
     /// bound stay in force, and the drop is tried again at the next step.
     Hold,
+}
+
+impl Branch {
+    /// Its name in records: `advance`, `keep`, `reset` or `hold`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Branch::Advance => "advance",
+            Branch::Keep => "keep",
+            Branch::Reset => "reset",
+            Branch::Hold => "hold",
+        }
+    }
 }
 
 /// What one step decided.

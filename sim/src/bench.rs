@@ -20,15 +20,19 @@ pub struct BenchRun {
     pub world: u64,
     /// The method's position in the benchmark's list of methods.
     pub method: usize,
-    /// The run; its per-period samples only on [`FIGURE_WORLD`].
+    /// The run; its per-period samples only on [`FIGURE_WORLD`], its visits only when kept.
     pub run: Run,
 }
 
 impl BenchRun {
-    /// The run of `method` on `world`, its samples dropped unless the figure shows that world.
-    pub fn new(world: u64, method: usize, mut run: Run) -> Self {
+    /// The run of `method` on `world`, its samples dropped unless the figure shows that world and its visits
+    /// unless `keep_visits`.
+    pub fn new(world: u64, method: usize, mut run: Run, keep_visits: bool) -> Self {
         if world != FIGURE_WORLD {
             run.samples = Vec::new();
+        }
+        if !keep_visits {
+            run.visits = Vec::new();
         }
         Self { world, method, run }
     }

@@ -10,6 +10,7 @@
 
 use crate::methods::{Context, Controller, Method, MethodError};
 use crate::tracker::{Disturbance, RangeSensor, Tracker};
+use crate::visits::Visit;
 use crate::world::World;
 use fastrack_client::{pb, FastrackClient};
 use fastrack_online::geometry::{clearance, norm, sub, Point};
@@ -147,6 +148,9 @@ pub struct Run {
     pub control_period: f64,
     /// The planner's raw path at the end.
     pub final_path: Vec<Point>,
+    /// The relative state of every control period of the online loop, with its branch (Parametric FaSTrack).
+    #[serde(default, skip_serializing_if = "Vec::is_empty")]
+    pub visits: Vec<Visit>,
 }
 
 /// What every run against one model shares, fetched from the server once.
@@ -216,6 +220,11 @@ impl Simulator {
         self.sensor.range
     }
 
+    /// The names of the model's state coordinates, in order (the columns of a visits file).
+    pub fn state_names(&self) -> Vec<String> {
+        self.tracker.system().state.iter().map(|d| d.name.to_string()).collect()
+    }
+
     /// Runs `method` through `world` on a thread of its own (see the module's doc), its randomness seeded
     /// by `seed`.
     pub fn spawn_run(
@@ -264,6 +273,7 @@ impl Simulator {
             steb_radius: self.steb_radius(),
             control_period,
             final_path: Vec::new(),
+            visits: Vec::new(),
         };
         // A method that cannot start on the server (its stream refused, a call timed out) is a failed run,
         // not a failed benchmark; a method that cannot run on this model at all is an error.
@@ -287,7 +297,7 @@ impl Simulator {
             }
             let sensed = self.sensor.sense(&world.obstacles, position);
             let started = Instant::now();
-            let decision = match controller.step(&s, &sensed).await {
+            let mut decision = match controller.step(&s, &sensed).await {
                 Ok(decision) => decision,
                 Err(e) => {
                     run.outcome = Outcome::Failed(e.to_string());
@@ -301,6 +311,7 @@ impl Simulator {
             run.held_steps += usize::from(decision.held);
             run.round_trips += decision.round_trips;
             run.out_of_domain += usize::from(decision.out_of_domain);
+            run.visits.extend(decision.visit.take());
             if let Some(disturbance) = &settings.disturbance {
                 if (t / disturbance.period).floor() != ((t - control_period) / disturbance.period).floor() || k == 0 {
                     push = disturbance.draw(&mut rng);

@@ -2,11 +2,12 @@
 //! [`world`]s from files or seeds, the tracker's true dynamics and a range sensor ([`tracker`]), the
 //! methods compared ([`methods`]: Parametric FaSTrack over the `Track` stream, FaSTrack at fixed speeds,
 //! Meta-FaSTrack, MPPI), one run of a method through a world ([`episode`]), the benchmark's summaries
-//! ([`bench`]) and the figures ([`plot`]).
+//! ([`bench`]), the relative states the online loop visited ([`visits`]) and the figures ([`plot`]).
 
 pub mod bench;
 pub mod episode;
 pub mod methods;
 pub mod plot;
 pub mod tracker;
+pub mod visits;
 pub mod world;

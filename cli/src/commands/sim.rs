@@ -14,12 +14,13 @@ use fastrack_sim::episode::{Outcome, Run, RunSettings, Simulator};
 use fastrack_sim::methods::Method;
 use fastrack_sim::plot::{methods_on_one_world, over_time, time_to_goal, trajectory};
 use fastrack_sim::tracker::Disturbance;
+use fastrack_sim::visits::write_csv;
 use fastrack_sim::world::{World, WorldSpec};
 use fastrack_valuefn::record::write_record;
 use fastrack_valuefn::shard::Shard;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::sync::Semaphore;
@@ -183,6 +184,11 @@ struct BenchArgs {
     /// Folder the shard's part is written into, as `sim-bench-part-<index>-of-<count>.json`.
     #[arg(long)]
     part_dir: Option<PathBuf>,
+    /// Write the relative state of every control period of PF's runs, with its branch and `beta`, into this
+    /// CSV file (the operational states `fastrack-grid verify --operational-states` checks); a shard's part
+    /// then keeps them for `sim merge --visits`.
+    #[arg(long)]
+    visits: Option<PathBuf>,
     #[command(flatten)]
     recording: Recording,
     #[command(flatten)]
@@ -196,6 +202,9 @@ struct MergeArgs {
     /// Folder holding every shard's part.
     #[arg(long)]
     part_dir: PathBuf,
+    /// Write the visits the parts kept (shards run with `--visits`) into this CSV file.
+    #[arg(long)]
+    visits: Option<PathBuf>,
     #[command(flatten)]
     recording: Recording,
 }
@@ -328,6 +337,7 @@ async fn bench(client: &FastrackClient, args: BenchArgs, json_mode: bool) -> any
         ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} runs {msg}")?.progress_chars("=> "),
     );
     let started = Instant::now();
+    let keep_visits = args.visits.is_some();
     let slots = Arc::new(Semaphore::new(args.jobs));
     let mut tasks = Vec::new();
     for (seed, world) in &worlds {
@@ -340,7 +350,7 @@ async fn bench(client: &FastrackClient, args: BenchArgs, json_mode: bool) -> any
                 let done = simulator.spawn_run(world, method, seed).await.context("a run's thread failed")?;
                 bar.set_message(format!("world {seed} {label}"));
                 bar.inc(1);
-                anyhow::Ok(BenchRun::new(seed, m, done?))
+                anyhow::Ok(BenchRun::new(seed, m, done?, keep_visits))
             }));
         }
     }
@@ -352,10 +362,13 @@ async fn bench(client: &FastrackClient, args: BenchArgs, json_mode: bool) -> any
     let config = json!({"model": args.simulation.model, "worlds": args.worlds, "methods": args.methods,
         "control_period_s": simulator.control_period(), "substeps": args.simulation.substeps,
         "sensor_range_m": simulator.sensor_range(), "time_limit_s": args.simulation.time_limit,
-        "disturbance_m_s": args.simulation.disturbance,
+        "disturbance_m_s": args.simulation.disturbance, "state": simulator.state_names(),
         "world": {"size": args.generation.size, "density": args.generation.density, "size_range": args.generation.size_range,
             "feasible_for": args.generation.feasible_for}});
     let wall_s = started.elapsed().as_secs_f64();
+    if let Some(path) = &args.visits {
+        write_visits(path, &config, &runs, json_mode)?;
+    }
     if let Some(dir) = &args.part_dir {
         let part = BenchPart { config, shard, wall_s, items: runs };
         let path = part.write(dir, PART_STEM).with_context(|| format!("writing the part into {}", dir.display()))?;
@@ -384,12 +397,38 @@ fn merge(args: MergeArgs, json_mode: bool) -> anyhow::Result<()> {
     let merged = BenchPart::merge(&args.part_dir, PART_STEM)?;
     let mut runs = merged.items;
     runs.sort_by_key(|r| (r.world, r.method));
+    if let Some(path) = &args.visits {
+        anyhow::ensure!(
+            runs.iter().any(|r| !r.run.visits.is_empty()),
+            "the parts in {} kept no visits: run the shards with --visits",
+            args.part_dir.display()
+        );
+        write_visits(path, &merged.config, &runs, json_mode)?;
+    }
     let command = format!(
         "fastrack sim merge --part-dir {}{}",
         args.part_dir.display(),
         args.recording.record.as_ref().map_or(String::new(), |name| format!(" --record {name}"))
     );
     report(&merged.config, &runs, merged.wall_s, &command, &args.recording, json_mode)
+}
+
+/// Writes the visits of `runs` (world by world) into `path` as CSV, the state columns named by the
+/// benchmark's configuration.
+fn write_visits(path: &Path, config: &serde_json::Value, runs: &[BenchRun], json_mode: bool) -> anyhow::Result<()> {
+    let names: Vec<String> =
+        serde_json::from_value(config["state"].clone()).context("the configuration names no state coordinates")?;
+    let written = write_csv(path, &names, runs.iter().flat_map(|r| &r.run.visits))
+        .with_context(|| format!("writing the visits into {}", path.display()))?;
+    let mut by_branch = std::collections::BTreeMap::<&str, usize>::new();
+    for visit in runs.iter().flat_map(|r| &r.run.visits) {
+        *by_branch.entry(visit.branch.name()).or_default() += 1;
+    }
+    let by_branch: Vec<String> = by_branch.iter().map(|(name, count)| format!("{name} {count}")).collect();
+    if !json_mode {
+        eprintln!("visits: {written} ({}) in {}", by_branch.join(", "), path.display());
+    }
+    Ok(())
 }
 
 /// PF must never collide nor exceed its bound.

@@ -6,8 +6,8 @@ use anyhow::Context;
 use fastrack_grid::format;
 use fastrack_grid::solver::Solution;
 use fastrack_grid::verify::{
-    apply_reports, required_samples, verify_rows, Batching, Correction, FalsificationOptions, RowReport, SearchOptions,
-    Selection, Tracker, VerifyOptions,
+    apply_reports, required_samples, verify_rows, Batching, Correction, FalsificationOptions, RecordedStates,
+    RowReport, SearchOptions, Selection, Tracker, VerifyOptions,
 };
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::manifest::{Manifest, TebRow};
@@ -111,6 +111,11 @@ pub struct Args {
     /// as many as the uniform check).
     #[arg(long)]
     no_zero_error_slice: bool,
+    /// Relative states the online loop visited in simulated runs (`fastrack sim bench --visits FILE`): each
+    /// round also rolls out as many draws from those of them inside its set as the uniform check (none: no
+    /// operational check).
+    #[arg(long)]
+    operational_states: Option<PathBuf>,
     /// Starts of the falsification search over start states: the samples the other checks pushed furthest
     /// (0: no falsification).
     #[arg(long, default_value_t = 64)]
@@ -306,12 +311,25 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     let betas = (!args.betas.is_empty()).then_some(&args.betas[..]);
     let started = Instant::now();
-    let selection = Selection { betas, adversaries: &adversaries, grid_tolerance: args.grid_tolerance };
+    let state_names: Vec<String> = bundle.manifest.state.iter().map(|d| d.name.clone()).collect();
+    let operational =
+        args.operational_states.as_deref().map(|path| RecordedStates::read(path, &state_names)).transpose()?;
+    if let Some(recorded) = &operational {
+        println!("operational states: {} recorded, by branch {:?}", recorded.len(), recorded.branches);
+    }
+    let selection = Selection {
+        betas,
+        adversaries: &adversaries,
+        grid_tolerance: args.grid_tolerance,
+        operational: operational.as_ref(),
+    };
     let reports = verify_rows(&evaluator, &bundle.manifest, &system, &selection, shard, &options, &bar)?;
     bar.finish_and_clear();
     let config = json!({ "bundle": args.bundle, "model": bundle.manifest.name, "version": bundle.manifest.version,
         "onnx_sha256": bundle.manifest.onnx_sha256, "untrained": bundle.manifest.untrained, "options": options,
         "betas": args.betas, "grid_solutions": args.grid_solutions, "grid_tolerance": args.grid_tolerance,
+        "operational_states": args.operational_states,
+        "operational_recorded": operational.as_ref().map(|r| json!({"states": r.len(), "by_branch": r.branches})),
         "threads": rayon::current_num_threads() });
     if let Some(dir) = &args.part_dir {
         let part = Part { config, shard, wall_s: started.elapsed().as_secs_f64(), items: reports };

@@ -8,30 +8,33 @@
 //! random bang-bang planners, and a cross-entropy search over planner schedules ([`search`]) from the samples
 //! of each batch the others pushed furthest. A sample *violates* the round when its error exceeds
 //! `(1 + slack) c`. Once a round's uniform samples hold, the same set is checked where robots are: uniform
-//! samples of its zero-error slice (error coordinates at 0, where starts and planner resets put a robot) and
-//! a falsification search over start states ([`falsify`]) from the samples both pushed furthest; a violation
-//! in either ends the round as one in the uniform samples does. The first round samples under
-//! `(1 + margin) level`, or under the level whose set holds a
-//! given share of the proposal box where that is higher; a round with a violation ends there, the level is
-//! raised to the largest error seen, and the next round samples afresh, until a round rolls out all `N`
-//! samples without a violation. A row whose rounds run out, or whose raised level would take the set past the trained domain's
-//! error coordinates, is not verified: its violations stay in the report and in the manifest. That is the
+//! samples of its zero-error slice (error coordinates at 0, where starts and planner resets put a robot),
+//! draws from the states the online loop visited in simulated runs that lie in the set ([`operational`]),
+//! and a falsification search over start states ([`falsify`]) from the samples the others pushed furthest; a
+//! violation in any ends the round as one in the uniform samples does. The first round samples under
+//! `(1 + margin) level`, or under the level whose set holds a given share of the proposal box where that is
+//! higher; a round with a violation ends there, the level is raised to the largest error seen, and the next
+//! round samples afresh, until a round rolls out all `N` samples of every check without a violation. A row
+//! whose rounds run out, or whose raised level would take the set past the trained domain's error coordinates,
+//! is not verified: its violations stay in the report and in the manifest. That is the
 //! [`Correction::Set`] correction; [`Correction::Bound`] keeps sampling the first round's set and raises only
 //! the bound the errors are checked against.
 //!
-//! With `N >= (2 / eps) (ln(1 / delta) + 1)` samples in the final round, the largest error over them bounds the
-//! error from all but an `eps` fraction (by measure) of `{V <= c}`, with confidence `1 - delta` (scenario
-//! approach, one decision variable: the level), for these planner families and this horizon; it is at most
-//! `(1 + slack) c`. The search only adds evidence: it can raise the largest error, never lower it, and the
+//! With `N >= (2 / eps) (ln(1 / delta) + 1)` samples of a distribution in the final round, the largest error
+//! over them bounds the error from all but an `eps` fraction (by that distribution's measure) of `{V <= c}`,
+//! with confidence `1 - delta` (scenario approach, one decision variable: the level), for these planner
+//! families and this horizon; it is at most `(1 + slack) c`. The search only adds evidence: it can raise the largest error, never lower it, and the
 //! samples it starts from are chosen by the other families' errors, so the guarantee is stated for them.
 
 mod batch;
 mod falsify;
+mod operational;
 mod sampling;
 mod search;
 
 pub use batch::Batching;
 pub use falsify::FalsificationOptions;
+pub use operational::RecordedStates;
 pub use search::SearchOptions;
 
 use crate::solver::Solution;
@@ -43,9 +46,10 @@ use fastrack_valuefn::simulation::Planner;
 use fastrack_valuefn::system::AffineSystem;
 use fastrack_valuefn::teb::{reshape_at_set_levels, TebOptions};
 use indicatif::ProgressBar;
+use operational::RecordedSampler;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
-use sampling::SublevelSampler;
+use sampling::{StateSource, SublevelSampler};
 use serde::{Deserialize, Serialize};
 use std::time::Instant;
 
@@ -202,6 +206,9 @@ pub enum VerifyError {
         /// Proposals drawn.
         proposed: usize,
     },
+    /// The recorded operational states cannot be read or sampled.
+    #[error("operational states: {0}")]
+    Operational(String),
     /// ONNX Runtime failed.
     #[error(transparent)]
     Runtime(#[from] RuntimeError),
@@ -261,6 +268,8 @@ pub struct RoundReport {
 pub const UNIFORM: &str = "uniform";
 /// The check of uniform samples of the set's zero-error slice.
 pub const ZERO_ERROR_SLICE: &str = "zero-error-slice";
+/// The check of draws from the recorded states of the online loop that lie in the round's set.
+pub const OPERATIONAL: &str = "operational";
 /// The falsification search over start states.
 pub const FALSIFICATION: &str = "falsification";
 
@@ -401,12 +410,15 @@ struct Sampled {
     worst: (Vec<f64>, Vec<f64>),
 }
 
-/// One round with errors checked against `level`: the uniform samples of the round's set, then (if they held)
-/// the samples of its zero-error slice, then (if those held) the falsification search from the starts both
-/// pushed furthest. Each check rolls out batches until its samples are done or a batch has a violation.
+/// One round with errors checked against `level`: the uniform samples of the round's set, then (each only if
+/// every check before it held) the samples of its zero-error slice, the draws from the recorded operational
+/// states inside it, and the falsification search from the starts the sampled checks pushed furthest. Each
+/// sampled check rolls out batches until its samples are done or a batch has a violation.
+#[allow(clippy::too_many_arguments)]
 fn run_round(
     scene: &Scene<'_>,
     mut sampler: SublevelSampler<'_>,
+    operational: Option<&RecordedStates>,
     domain: (&[f64], &[f64]),
     level: f64,
     n: usize,
@@ -421,23 +433,35 @@ fn run_round(
     let acceptance = sampled.acceptance;
     let mut checks = vec![sampled.check];
     let mut worst = vec![sampled.worst];
+    // A check whose set holds (almost) none of its distribution's states rolls nothing out, and says so.
+    let empty = |distribution: &str| CheckResult {
+        distribution: distribution.into(),
+        samples: 0,
+        violations: 0,
+        max_error: 0.0,
+    };
+    let mut add = |run: SampledRun, checks: &mut Vec<CheckResult>| {
+        searched += run.searched;
+        rollout_steps += run.rollout_steps;
+        checks.push(run.sampled.check);
+        worst.push(run.sampled.worst);
+    };
     if options.zero_error_slice && checks[0].violations == 0 {
         let mut slice_sampler = sampler.on_zero_error_slice(scene.system);
         match run_samples(scene, &mut slice_sampler, ZERO_ERROR_SLICE, level, n, options, rng, &mut tally) {
-            Ok(slice) => {
-                searched += slice.searched;
-                rollout_steps += slice.rollout_steps;
-                checks.push(slice.sampled.check);
-                worst.push(slice.sampled.worst);
-            }
-            // A set that holds (almost) no zero-error state: nothing to roll out, and the report says so.
-            Err(VerifyError::Sampling { .. }) => checks.push(CheckResult {
-                distribution: ZERO_ERROR_SLICE.into(),
-                samples: 0,
-                violations: 0,
-                max_error: 0.0,
-            }),
+            Ok(run) => add(run, &mut checks),
+            Err(VerifyError::Sampling { .. }) => checks.push(empty(ZERO_ERROR_SLICE)),
             Err(e) => return Err(e),
+        }
+    }
+    if let Some(recorded) = operational.filter(|_| checks.iter().all(|c| c.violations == 0)) {
+        let mut recorded_sampler =
+            RecordedSampler::new(scene.evaluator, scene.params, sampled_level, recorded, domain)?;
+        if recorded_sampler.inside() == 0 {
+            checks.push(empty(OPERATIONAL));
+        } else {
+            let run = run_samples(scene, &mut recorded_sampler, OPERATIONAL, level, n, options, rng, &mut tally)?;
+            add(run, &mut checks);
         }
     }
     if options.falsification.enabled() && checks.iter().all(|c| c.violations == 0) {
@@ -489,7 +513,7 @@ struct SampledRun {
 #[allow(clippy::too_many_arguments)]
 fn run_samples(
     scene: &Scene<'_>,
-    sampler: &mut SublevelSampler<'_>,
+    sampler: &mut dyn StateSource,
     distribution: &str,
     level: f64,
     n: usize,
@@ -568,13 +592,15 @@ fn run_samples(
 }
 
 /// Verifies one row with the iterated level correction and returns the report (the row itself is not
-/// modified). `grid` is the grid solution whose worst-case planner plays, if any.
+/// modified). `grid` is the grid solution whose worst-case planner plays, if any; `operational`, the recorded
+/// states of the online loop the operational check draws from, if any.
 pub fn verify_row(
     evaluator: &Evaluator,
     manifest: &Manifest,
     system: &AffineSystem,
     row: &TebRow,
     grid: Option<&Solution>,
+    operational: Option<&RecordedStates>,
     options: &VerifyOptions,
 ) -> Result<RowReport, VerifyError> {
     check(options)?;
@@ -638,7 +664,7 @@ pub fn verify_row(
             options.proposal_box,
             options.max_proposals,
         );
-        let round = run_round(&scene, sampler, (&domain_lo, &domain_hi), level, n, options, &mut rng)?;
+        let round = run_round(&scene, sampler, operational, (&domain_lo, &domain_hi), level, n, options, &mut rng)?;
         tracing::info!(
             beta = row.beta,
             level,
@@ -694,6 +720,8 @@ pub struct Selection<'a> {
     pub adversaries: &'a [Solution],
     /// Largest distance in `beta` between a row and the grid solution that plays it.
     pub grid_tolerance: f64,
+    /// Recorded states of the online loop, for the operational check of every row (none: no such check).
+    pub operational: Option<&'a RecordedStates>,
 }
 
 /// Verifies the rows of `manifest` the selection names, writing each
@@ -737,7 +765,7 @@ pub fn verify_rows(
     for i in mine {
         let row = &manifest.teb_table[i];
         let grid = nearest_adversary(selection.adversaries, row.beta, selection.grid_tolerance);
-        let report = verify_row(evaluator, manifest, system, row, grid, options)?;
+        let report = verify_row(evaluator, manifest, system, row, grid, selection.operational, options)?;
         tracing::info!(
             beta = report.beta,
             level = report.level,

@@ -19,6 +19,15 @@ const PROPOSAL_CHUNK: usize = 8192;
 /// An accepted state this close to a narrowed edge (as a share of the half-width) stops the sampling.
 const EDGE_GUARD: f64 = 0.95;
 
+/// Where a sampled check draws its states from.
+pub(super) trait StateSource {
+    /// `count` more states, row-major.
+    fn draw(&mut self, count: usize, rng: &mut StdRng) -> Result<Vec<f64>, VerifyError>;
+
+    /// Share of the states considered that lay in the set.
+    fn acceptance(&self) -> f64;
+}
+
 /// Draws uniform states of `{V <= level}` for one parameter vector.
 pub(super) struct SublevelSampler<'a> {
     evaluator: &'a Evaluator,
@@ -91,15 +100,6 @@ impl<'a> SublevelSampler<'a> {
         self.level
     }
 
-    /// Share of the proposals accepted so far.
-    pub fn acceptance(&self) -> f64 {
-        if self.proposed == 0 {
-            0.0
-        } else {
-            self.accepted as f64 / self.proposed as f64
-        }
-    }
-
     /// The level whose sublevel set holds the share `acceptance` of this sampler's proposal box, estimated from
     /// a pilot of proposals: the value quantile at that share. Where it lies above this sampler's level, a
     /// sampler at it draws from a wider box, in which its set holds a smaller share.
@@ -122,9 +122,19 @@ impl<'a> SublevelSampler<'a> {
         let k = ((acceptance * pilot as f64).ceil() as usize).clamp(1, pilot) - 1;
         Ok(values[k])
     }
+}
 
-    /// `count` more states, row-major.
-    pub fn draw(&mut self, count: usize, rng: &mut StdRng) -> Result<Vec<f64>, VerifyError> {
+impl StateSource for SublevelSampler<'_> {
+    /// Share of the proposals accepted so far.
+    fn acceptance(&self) -> f64 {
+        if self.proposed == 0 {
+            0.0
+        } else {
+            self.accepted as f64 / self.proposed as f64
+        }
+    }
+
+    fn draw(&mut self, count: usize, rng: &mut StdRng) -> Result<Vec<f64>, VerifyError> {
         let n_state = self.lo.len();
         let mut out = Vec::with_capacity(count * n_state);
         while out.len() < count * n_state {

@@ -132,6 +132,7 @@ impl LevelPlanner {
             replanned,
             reset: false,
             held: false,
+            visit: None,
             round_trips: 1,
             out_of_domain: !in_domain,
         })

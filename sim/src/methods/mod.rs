@@ -11,6 +11,7 @@ pub use mppi::{Mppi, MppiSettings};
 pub use parametric::Parametric;
 
 use crate::tracker::Tracker;
+use crate::visits::Visit;
 use crate::world::World;
 use fastrack_client::{pb, FastrackClient};
 use fastrack_online::geometry::{Obstacle, Point};
@@ -93,6 +94,8 @@ pub struct Decision {
     pub round_trips: usize,
     /// The control was read at a relative state outside the model's trained domain (extrapolated).
     pub out_of_domain: bool,
+    /// The relative state the online loop's control was read at, with its branch (Parametric FaSTrack).
+    pub visit: Option<Visit>,
 }
 
 /// Why a method cannot go on.

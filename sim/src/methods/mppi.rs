@@ -112,6 +112,7 @@ impl Mppi {
             replanned,
             reset: false,
             held: false,
+            visit: None,
             round_trips: 0,
             out_of_domain: false,
         })

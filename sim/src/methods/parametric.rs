@@ -2,6 +2,7 @@
 //! grid as its raw-path planner.
 
 use super::{Context, Decision, MethodError};
+use crate::visits::Visit;
 use fastrack_online::geometry::{Obstacle, Point};
 use fastrack_online::online_loop::{Branch, LoopSettings, OnlineLoop};
 use fastrack_online::raw_path::GridAStar;
@@ -39,6 +40,7 @@ impl Parametric {
             held: report.branch == Branch::Hold,
             round_trips: report.round_trips,
             out_of_domain: !report.in_domain,
+            visit: Some(Visit { branch: report.branch, beta: report.beta_query, state: report.relative_state }),
         })
     }
 
