@@ -97,6 +97,11 @@ async fn the_loops_visits_are_recorded_and_verified_as_the_operational_distribut
     assert_eq!(names, ["uniform", "zero-error-slice", "operational", "falsification"], "{checks}");
     assert_eq!(checks[2]["samples"], 7, "N = ceil((2 / 0.5) (ln 2 + 1)) draws: {checks}");
     assert_eq!(record["config"]["operational_recorded"]["states"], lines.len());
+    // Beside it, the states recorded while this row was in force and how many of them left its set.
+    let in_force = &record["figures"]["rows"][0]["rounds"][0]["in_force"];
+    let with_row = lines.iter().filter(|l| l.split(',').nth(1) == Some("1.25")).count();
+    assert_eq!(in_force["recorded"], with_row, "{in_force}");
+    assert!(in_force["outside"].as_u64().is_some_and(|n| n <= with_row as u64), "{in_force}");
 
     // A file of another model's states, or a broken one, is refused naming what is wrong.
     std::fs::write(at("quad.csv"), "branch,beta,x_r,y_r,z_r\nadvance,1,0,0,0\n").unwrap();

@@ -394,6 +394,7 @@ fn finish(
         "bound",
         "violations / N",
         "checks: N / violations / max l",
+        "recorded in force / outside the set",
         "hardest planner",
         "max l per planner",
         "searched",
@@ -432,6 +433,10 @@ fn finish(
                 .map(|c| format!("{} {} / {} / {:.4}", c.distribution, c.samples, c.violations, c.max_error))
                 .collect::<Vec<_>>()
                 .join("; "),
+            r.rounds
+                .last()
+                .and_then(|round| round.in_force)
+                .map_or_else(|| "-".to_string(), |f| format!("{} / {}", f.recorded, f.outside)),
             v.hardest_planner().map_or_else(String::new, |p| p.family.clone()),
             per_planner.join("; "),
             format!("{}", r.searched),

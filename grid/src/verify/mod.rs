@@ -34,7 +34,7 @@ mod search;
 
 pub use batch::Batching;
 pub use falsify::FalsificationOptions;
-pub use operational::RecordedStates;
+pub use operational::{InForce, RecordedStates};
 pub use search::SearchOptions;
 
 use crate::solver::Solution;
@@ -262,6 +262,10 @@ pub struct RoundReport {
     /// Each check of the round in the order it ran (a check after one with a violation does not run).
     #[serde(default)]
     pub checks: Vec<CheckResult>,
+    /// With the operational check: the recorded states taken while this row was in force, and how many lie
+    /// outside the round's set.
+    #[serde(default)]
+    pub in_force: Option<InForce>,
 }
 
 /// The check of uniform samples of the round's set.
@@ -454,9 +458,11 @@ fn run_round(
             Err(e) => return Err(e),
         }
     }
+    let mut in_force = None;
     if let Some(recorded) = operational.filter(|_| checks.iter().all(|c| c.violations == 0)) {
         let mut recorded_sampler =
             RecordedSampler::new(scene.evaluator, scene.params, sampled_level, recorded, domain)?;
+        in_force = Some(recorded_sampler.in_force);
         if recorded_sampler.inside() == 0 {
             checks.push(empty(OPERATIONAL));
         } else {
@@ -485,6 +491,7 @@ fn run_round(
             max_error: checks.iter().map(|c| c.max_error).fold(0.0, f64::max),
             acceptance,
             checks,
+            in_force,
         },
         tally,
         searched,

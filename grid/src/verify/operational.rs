@@ -13,6 +13,7 @@ use super::VerifyError;
 use fastrack_valuefn::runtime::Evaluator;
 use rand::rngs::StdRng;
 use rand::Rng;
+use serde::{Deserialize, Serialize};
 use std::collections::BTreeMap;
 use std::path::Path;
 
@@ -24,6 +25,8 @@ const CHUNK: usize = 8192;
 pub struct RecordedStates {
     /// The states, row-major, in the model's state order.
     states: Vec<f64>,
+    /// The `beta` in force when each state was recorded.
+    betas: Vec<f64>,
     /// State coordinates per state.
     n_state: usize,
     /// How many states each branch of adjustPlannerControl recorded, by name.
@@ -53,7 +56,7 @@ impl RecordedStates {
             ));
         }
         let n_state = state_names.len();
-        let mut states = Vec::new();
+        let (mut states, mut betas) = (Vec::new(), Vec::new());
         let mut branches = BTreeMap::new();
         for (index, line) in lines {
             let fields: Vec<&str> = line.split(',').map(str::trim).collect();
@@ -70,7 +73,9 @@ impl RecordedStates {
                 if !value.is_finite() {
                     return Err(format!("line {}: `{name}` = {value}; must be finite", index + 1));
                 }
-                if *name != "beta" {
+                if *name == "beta" {
+                    betas.push(value);
+                } else {
                     states.push(value);
                 }
             }
@@ -79,7 +84,7 @@ impl RecordedStates {
         if states.is_empty() {
             return Err("the file holds a header and no visit".into());
         }
-        Ok(Self { states, n_state, branches })
+        Ok(Self { states, betas, n_state, branches })
     }
 
     /// How many states were recorded.
@@ -93,16 +98,29 @@ impl RecordedStates {
     }
 }
 
+/// The recorded states taken while a row was in force, and how many of them lie outside that row's set (or
+/// the trained domain): how often the online loop ran on the row from states its certificate does not cover.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+pub struct InForce {
+    /// States recorded with the row in force.
+    pub recorded: usize,
+    /// Of them, outside the row's set `{V <= c}` or the trained domain.
+    pub outside: usize,
+}
+
 /// Draws states independently, with replacement, from the recorded states inside `{V <= level}` at one
 /// parameter vector and inside the trained domain.
 pub(super) struct RecordedSampler {
     inside: Vec<f64>,
     n_state: usize,
     recorded: usize,
+    /// The states recorded with this row in force.
+    pub in_force: InForce,
 }
 
 impl RecordedSampler {
-    /// The recorded states of `recorded` that lie in the trained domain (`lo`..`hi`) and in `{V <= level}`.
+    /// The recorded states of `recorded` that lie in the trained domain (`lo`..`hi`) and in `{V <= level}` at
+    /// `params` (the row's `beta` in every parameter).
     pub fn new(
         evaluator: &Evaluator,
         params: &[f64],
@@ -111,24 +129,30 @@ impl RecordedSampler {
         (lo, hi): (&[f64], &[f64]),
     ) -> Result<Self, VerifyError> {
         let n_state = recorded.n_state;
-        let in_domain: Vec<&[f64]> = recorded
+        let row_beta = params[0];
+        let in_force_here = |k: usize| (recorded.betas[k] - row_beta).abs() < 1e-9;
+        let in_domain: Vec<(usize, &[f64])> = recorded
             .states
             .chunks(n_state)
-            .filter(|s| s.iter().zip(lo.iter().zip(hi)).all(|(&x, (&l, &h))| (l..=h).contains(&x)))
+            .enumerate()
+            .filter(|(_, s)| s.iter().zip(lo.iter().zip(hi)).all(|(&x, (&l, &h))| (l..=h).contains(&x)))
             .collect();
+        let recorded_here = (0..recorded.len()).filter(|&k| in_force_here(k)).count();
         let params32: Vec<f32> = params.iter().map(|&p| p as f32).collect();
-        let mut inside = Vec::new();
+        let (mut inside, mut inside_here) = (Vec::new(), 0);
         for chunk in in_domain.chunks(CHUNK) {
-            let s: Vec<f32> = chunk.iter().flat_map(|state| state.iter().map(|&x| x as f32)).collect();
+            let s: Vec<f32> = chunk.iter().flat_map(|(_, state)| state.iter().map(|&x| x as f32)).collect();
             let p: Vec<f32> = params32.iter().copied().cycle().take(chunk.len() * params32.len()).collect();
             let values = evaluator.evaluate(&s, &p)?.value;
-            for (state, &v) in chunk.iter().zip(&values) {
+            for ((k, state), &v) in chunk.iter().zip(&values) {
                 if f64::from(v) <= level {
                     inside.extend_from_slice(state);
+                    inside_here += usize::from(in_force_here(*k));
                 }
             }
         }
-        Ok(Self { inside, n_state, recorded: recorded.len() })
+        let in_force = InForce { recorded: recorded_here, outside: recorded_here - inside_here };
+        Ok(Self { inside, n_state, recorded: recorded.len(), in_force })
     }
 
     /// How many recorded states lie in the set.
@@ -171,6 +195,7 @@ mod tests {
         let recorded = RecordedStates::parse(text, &names()).unwrap();
         assert_eq!(recorded.len(), 3);
         assert_eq!(recorded.states[4..8], [0.0, 0.0, 0.0, 0.5]);
+        assert_eq!(recorded.betas, [1.0, 0.5, 1.0]);
         assert_eq!(recorded.branches.get("advance"), Some(&2));
         assert_eq!(recorded.branches.get("keep"), Some(&1));
     }
