@@ -119,6 +119,8 @@ pub async fn run(settings: Settings) -> anyhow::Result<()> {
         scheduler: Arc::clone(&scheduler),
         metrics: Arc::clone(&metrics),
         stream_idle_timeout: settings.stream_idle_timeout,
+        stream_send_timeout: settings.stream_send_timeout,
+        track_streams: Arc::new(tokio::sync::Semaphore::new(settings.max_track_streams)),
         draining: drain_rx.clone(),
     })
     .max_decoding_message_size(limit)

@@ -64,6 +64,14 @@ pub struct Options {
     /// Seconds a Track stream may stay without a tick before it is closed [default: 60].
     #[arg(long, env = "FASTRACK_STREAM_IDLE_TIMEOUT_S")]
     pub stream_idle_timeout_s: Option<f64>,
+    /// Seconds a Track reply may wait for its client to read before the stream is closed: a client that
+    /// stops reading holds at most its stream's reply buffer, and only that long [default: 10].
+    #[arg(long, env = "FASTRACK_STREAM_SEND_TIMEOUT_S")]
+    pub stream_send_timeout_s: Option<f64>,
+    /// Track streams open at once over all connections (those still waiting for `open` included); beyond
+    /// it a new stream gets RESOURCE_EXHAUSTED [default: 10000].
+    #[arg(long, env = "FASTRACK_MAX_TRACK_STREAMS")]
+    pub max_track_streams: Option<usize>,
     /// Seconds to drain open calls and streams after SIGTERM/SIGINT before exiting [default: 10].
     #[arg(long, env = "FASTRACK_SHUTDOWN_GRACE_S")]
     pub shutdown_grace_s: Option<f64>,
@@ -118,6 +126,8 @@ impl Options {
             max_batch_size,
             max_queue_delay_us,
             stream_idle_timeout_s,
+            stream_send_timeout_s,
+            max_track_streams,
             shutdown_grace_s,
             tls_cert,
             tls_key,
@@ -193,6 +203,10 @@ pub struct Settings {
     pub compute: ComputeSettings,
     /// Default idle timeout of Track streams.
     pub stream_idle_timeout: Duration,
+    /// How long a Track reply may wait for its client to read.
+    pub stream_send_timeout: Duration,
+    /// Track streams open at once.
+    pub max_track_streams: usize,
     /// Drain deadline at shutdown.
     pub shutdown_grace: Duration,
     /// TLS, if configured.
@@ -287,6 +301,8 @@ impl Settings {
                 max_queue_delay: Duration::from_micros(o.max_queue_delay_us.unwrap_or(0)),
             },
             stream_idle_timeout: positive_seconds("stream_idle_timeout_s", o.stream_idle_timeout_s.unwrap_or(60.0))?,
+            stream_send_timeout: positive_seconds("stream_send_timeout_s", o.stream_send_timeout_s.unwrap_or(10.0))?,
+            max_track_streams: at_least("max_track_streams", o.max_track_streams.unwrap_or(10_000), 1)?,
             shutdown_grace: positive_seconds("shutdown_grace_s", o.shutdown_grace_s.unwrap_or(10.0))?,
             tls,
             token_entries,
@@ -331,6 +347,8 @@ mod tests {
         assert!(err("no_such_key = 1").contains("unknown field"));
         assert!(err("shutdown_grace_s = 0.0").contains("positive"));
         assert!(err("stream_idle_timeout_s = 1e300").contains("at most 1e9"));
+        assert!(err("stream_send_timeout_s = 0.0").contains("stream_send_timeout_s = 0; must be a positive"));
+        assert!(err("max_track_streams = 0").contains("max_track_streams = 0; must be at least 1"));
         assert!(err("poll_interval_s = 1e300").contains("poll_interval_s"));
     }
 }

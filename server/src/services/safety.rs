@@ -26,6 +26,10 @@ pub struct Safety {
     pub metrics: Arc<Metrics>,
     /// Default idle timeout of `Track` streams.
     pub stream_idle_timeout: Duration,
+    /// How long a `Track` reply may wait for its client to read.
+    pub stream_send_timeout: Duration,
+    /// Permits for `Track` streams open at once, one taken per stream.
+    pub track_streams: Arc<tokio::sync::Semaphore>,
     /// Turns true when the server starts draining.
     pub draining: tokio::sync::watch::Receiver<bool>,
 }
@@ -209,6 +213,8 @@ impl SafetyService for Safety {
             scheduler: Arc::clone(&self.scheduler),
             metrics: Arc::clone(&self.metrics),
             default_idle: self.stream_idle_timeout,
+            send_timeout: self.stream_send_timeout,
+            streams: Arc::clone(&self.track_streams),
             draining: self.draining.clone(),
         };
         let stream = super::track::open(context, request.into_inner()).await?;

@@ -1,4 +1,9 @@
 //! The `Track` bidirectional stream: one per robot, answering every tick in order and keeping `beta_old`.
+//!
+//! What a stream may hold is bounded: the server keeps at most `max_track_streams` streams open at once (a
+//! permit taken before `open` is read), a stream's replies wait in a buffer of [`REPLY_BUFFER`] and at most
+//! the send timeout for a client that stopped reading, after which the stream is closed, and a stream with no
+//! tick for its idle timeout is closed with `DEADLINE_EXCEEDED`.
 
 use crate::loaded_model::LoadedModel;
 use crate::metrics::{code_name, Metrics};
@@ -10,6 +15,7 @@ use fastrack_proto::v1 as pb;
 use pb::track_request::Msg;
 use std::sync::Arc;
 use std::time::Duration;
+use tokio::sync::{OwnedSemaphorePermit, Semaphore};
 use tokio_stream::wrappers::ReceiverStream;
 use tokio_stream::StreamExt;
 use tonic::{Code, Status, Streaming};
@@ -17,6 +23,9 @@ use tracing::Instrument;
 
 /// Longest idle timeout a stream may ask for (one day).
 pub const MAX_IDLE_TIMEOUT_S: f64 = 86_400.0;
+
+/// Replies a stream buffers for its client.
+pub const REPLY_BUFFER: usize = 64;
 
 /// What a stream needs from the server.
 pub struct StreamContext {
@@ -28,15 +37,21 @@ pub struct StreamContext {
     pub metrics: Arc<Metrics>,
     /// Idle timeout when `open` asks for none.
     pub default_idle: Duration,
+    /// How long a reply may wait for the client to read it before the stream is closed.
+    pub send_timeout: Duration,
+    /// Permits for the streams open at once.
+    pub streams: Arc<Semaphore>,
     /// Turns true when the server drains: the stream ends with `UNAVAILABLE` after its current tick.
     pub draining: tokio::sync::watch::Receiver<bool>,
 }
 
-/// Counts an open stream in the active-streams gauge until dropped, and the stream's final code.
+/// Counts an open stream in the active-streams gauge and holds its permit until dropped, and the stream's
+/// final code.
 struct StreamGuard {
     metrics: Arc<Metrics>,
     model: String,
     code: Code,
+    _permit: OwnedSemaphorePermit,
 }
 
 impl Drop for StreamGuard {
@@ -54,6 +69,13 @@ pub async fn open(
     mut inbound: Streaming<pb::TrackRequest>,
 ) -> Result<ReceiverStream<Result<pb::TrackResponse, Status>>, Status> {
     let default_idle = context.default_idle;
+    let Ok(permit) = Arc::clone(&context.streams).try_acquire_owned() else {
+        let status = Status::resource_exhausted(
+            "the server holds as many Track streams as it allows (max_track_streams); retry later or on another replica",
+        );
+        context.metrics.call("Track", "-", status.code(), None);
+        return Err(status);
+    };
     let opened = async {
         let first = tokio::time::timeout(default_idle, inbound.next())
             .await
@@ -81,58 +103,66 @@ pub async fn open(
     .await;
     let (model, idle) = opened.inspect_err(|status| context.metrics.call("Track", "-", status.code(), None))?;
     context.metrics.stream_delta(1);
-    let guard =
-        StreamGuard { metrics: Arc::clone(&context.metrics), model: model.manifest.name.clone(), code: Code::Ok };
+    let guard = StreamGuard {
+        metrics: Arc::clone(&context.metrics),
+        model: model.manifest.name.clone(),
+        code: Code::Ok,
+        _permit: permit,
+    };
     tracing::debug!(model = %model.label(), "track stream opened");
-    let (tx, rx) = tokio::sync::mpsc::channel(64);
-    tokio::spawn(tick_loop(context, model, inbound, tx, idle, guard).in_current_span());
+    // One slot more than the replies, reserved for the status that closes the stream: a client that stopped
+    // reading still finds why, after its buffered replies.
+    let (tx, rx) = tokio::sync::mpsc::channel(REPLY_BUFFER + 1);
+    let last = tx.clone().try_reserve_owned().map_err(|_| Status::internal("a new reply channel has no room"))?;
+    tokio::spawn(
+        async move {
+            let mut guard = guard;
+            if let Err(status) = tick_loop(context, model, inbound, tx, idle, &mut guard).await {
+                guard.code = status.code();
+                last.send(Err(status));
+            }
+        }
+        .in_current_span(),
+    );
     Ok(ReceiverStream::new(rx))
 }
 
+/// Answers the stream's ticks in order until the client ends it (`Ok`) or the stream must close with a
+/// status: the server drains, no tick came for `idle`, the client went away or stopped reading.
 async fn tick_loop(
     mut context: StreamContext,
     model: Arc<LoadedModel>,
     mut inbound: Streaming<pb::TrackRequest>,
     tx: tokio::sync::mpsc::Sender<Result<pb::TrackResponse, Status>>,
     idle: Duration,
-    mut guard: StreamGuard,
-) {
+    guard: &mut StreamGuard,
+) -> Result<(), Status> {
     let mut beta_old = model.manifest.beta_range().1;
+    let draining = || Status::unavailable("the server is shutting down; reconnect to continue");
     loop {
         if *context.draining.borrow() {
-            guard.code = Code::Unavailable;
-            let _ = tx.send(Err(Status::unavailable("the server is shutting down; reconnect to continue"))).await;
-            return;
+            return Err(draining());
         }
         let next = tokio::select! {
             next = tokio::time::timeout(idle, inbound.next()) => next,
             changed = context.draining.changed() => {
                 if changed.is_err() {
-                    guard.code = Code::Unavailable;
-                    return;
+                    return Err(draining());
                 }
                 continue;
             }
         };
-        let next = match next {
-            Ok(next) => next,
-            Err(_) => {
-                guard.code = Code::DeadlineExceeded;
-                let _ = tx.send(Err(Status::deadline_exceeded(format!("no tick for {idle:?}; stream closed")))).await;
-                return;
-            }
-        };
         let reply = match next {
-            None => return,
-            Some(Err(status)) => {
+            Err(_) => return Err(Status::deadline_exceeded(format!("no tick for {idle:?}; stream closed"))),
+            Ok(None) => return Ok(()),
+            Ok(Some(Err(status))) => {
                 tracing::debug!(%status, "track stream ended by client");
-                guard.code = Code::Cancelled;
-                return;
+                return Err(Status::cancelled("the client ended the stream"));
             }
-            Some(Ok(pb::TrackRequest { msg: Some(Msg::Tick(tick)) })) => {
+            Ok(Some(Ok(pb::TrackRequest { msg: Some(Msg::Tick(tick)) }))) => {
                 answer(&context.scheduler, &model, tick, &mut beta_old).await
             }
-            Some(Ok(_)) => pb::TrackReply {
+            Ok(Some(Ok(_))) => pb::TrackReply {
                 error: Some(pb::TickError {
                     code: Code::InvalidArgument as i32,
                     message: "only one `open` is allowed, at the start; send `tick` messages".into(),
@@ -142,9 +172,18 @@ async fn tick_loop(
         };
         let code = reply.error.as_ref().map_or(Code::Ok, |e| Code::from(e.code));
         context.metrics.tick(&guard.model, code);
-        if tx.send(Ok(pb::TrackResponse { reply: Some(reply) })).await.is_err() {
-            guard.code = Code::Cancelled;
-            return;
+        let sent = tokio::time::timeout(context.send_timeout, tx.send(Ok(pb::TrackResponse { reply: Some(reply) })));
+        match sent.await {
+            Ok(Ok(())) => {}
+            Ok(Err(_)) => return Err(Status::cancelled("the client went away")),
+            Err(_) => {
+                // The client stopped reading: its buffer is full and stays so. Close rather than hold it.
+                let waited = context.send_timeout;
+                tracing::warn!(model = %guard.model, waited_s = waited.as_secs_f64(), "track stream closed: its client read no reply");
+                return Err(Status::resource_exhausted(format!(
+                    "the client read none of its {REPLY_BUFFER} buffered replies for {waited:?}; stream closed"
+                )));
+            }
         }
     }
 }
