@@ -1,8 +1,9 @@
 //! The online half of Parametric FaSTrack as a library a robot's own stack can call every control step:
-//! [`online_loop::OnlineLoop`] runs the paper's Alg. 3 against the fastrack service over one `Track`
-//! stream, with any raw-path planner behind [`raw_path::RawPathPlanner`] (A* on a grid by default) and the
+//! [`core::LoopCore`] makes the decisions of the paper's Alg. 3 without any I/O, and
+//! [`online_loop::OnlineLoop`] answers its questions from the fastrack service over one `Track` stream, with any raw-path planner behind [`raw_path::RawPathPlanner`] (A* on a grid by default) and the
 //! obstacles of [`geometry`].
 
+pub mod core;
 pub mod geometry;
 pub mod online_loop;
 pub mod raw_path;

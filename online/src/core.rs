@@ -1,0 +1,640 @@
+//! The decisions of the paper's Alg. 3, free of I/O: the planner state, the raw path, the obstacles sensed so
+//! far, the `beta` in force (`beta_old` of the next step) and the branch of adjustPlannerControl, with every
+//! question about the model asked of whoever drives the core.
+//!
+//! A step is a small exchange. [`LoopCore::begin`] takes the tracker state and the obstacles sensed now,
+//! measures `d_obs`, applies queryPlannerControl, replans when needed, and returns a [`Step`] whose
+//! [`Step::query`] says what it needs to know: a [`Query::Tick`] (the value, membership and control at the
+//! relative state of one planner state, the one question per step on the common branch) or a
+//! [`Query::Batch`] (the same for several relative states: the reset candidates, or the held state under
+//! `beta_old`). Its [`Step::answer`] returns either the next question or the step's [`StepReport`]; the core
+//! changes only when the report is returned. A driver answers over the network (`online_loop::OnlineLoop`,
+//! over a `Track` stream) or in process.
+
+use crate::geometry::{clearance, norm, remember, sub, Obstacle, Point};
+use crate::raw_path::{advance_along, PlanError, PlanRequest, RawPathPlanner};
+use fastrack_proto::planner_speed::{query_planner_control, row_for, PlannerSpeed, SpeedRow};
+use rand::rngs::StdRng;
+use rand::{Rng, SeedableRng};
+use serde::{Deserialize, Serialize};
+use std::collections::VecDeque;
+
+/// Which branch of adjustPlannerControl a step took.
+#[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum Branch {
+    /// `beta_query >= beta_old`: the planner moved along the raw path.
+    Advance,
+    /// `beta_query < beta_old` and `s - Q p*` in the certified set of `beta_query`: the planner jumped to `p*`.
+    Keep,
+    /// `beta_query < beta_old` and `s - Q p*` outside that set: the planner was reset into it, a replan flagged.
+    Reset,
+    /// `beta_query < beta_old` and no free planner state within `dTEBmax` of the tracker puts `s - Q p` in
+    /// that set: the planner waits where it is (a planner at rest obeys every speed bound), `beta_old` and its
+    /// bound stay in force, and the drop is tried again at the next step.
+    Hold,
+}
+
+impl Branch {
+    /// Its name in records: `advance`, `keep`, `reset` or `hold`.
+    pub fn name(self) -> &'static str {
+        match self {
+            Branch::Advance => "advance",
+            Branch::Keep => "keep",
+            Branch::Reset => "reset",
+            Branch::Hold => "hold",
+        }
+    }
+}
+
+/// The model's geometry and table as the core needs them.
+#[derive(Debug, Clone, PartialEq)]
+pub struct ModelView {
+    /// The TEB table as the planner-speed rule reads it, slowest row first.
+    pub speeds: Vec<SpeedRow>,
+    /// `Q`, row-major `n_state x 2`: the planner's position in the state space.
+    pub planner_to_state: Vec<f64>,
+    /// State coordinates.
+    pub n_state: usize,
+}
+
+/// How the core runs.
+#[derive(Debug, Clone, Copy, PartialEq)]
+pub struct CoreSettings {
+    /// Control period `dt` (s): the planner moves at most `beta_query dt` per axis per step.
+    pub control_period: f64,
+    /// Where the planner goes.
+    pub goal: Point,
+    /// The workspace, `(min, max)`, for the raw-path planner.
+    pub bounds: (Point, Point),
+    /// Reset candidates asked about per reset before the planner holds.
+    pub reset_candidates: usize,
+    /// Seed of the reset candidates.
+    pub seed: u64,
+}
+
+impl CoreSettings {
+    /// Why these settings cannot drive a loop, if they cannot.
+    pub fn check(&self) -> Result<(), CoreError> {
+        if !(self.control_period.is_finite() && self.control_period > 0.0) {
+            return Err(CoreError::Setup(format!(
+                "control_period = {}; must be a finite number of seconds > 0",
+                self.control_period
+            )));
+        }
+        if self.reset_candidates == 0 {
+            return Err(CoreError::Setup("reset_candidates must be at least 1".into()));
+        }
+        Ok(())
+    }
+}
+
+/// What the core asks of the model.
+#[derive(Debug, Clone, PartialEq)]
+pub enum Query {
+    /// Value, membership and control at `r = s - Q p` for the tracker state and one planner state, under
+    /// `beta`; `d_obs` is the step's distance to the nearest sensed obstacle (a `Track` tick carries it).
+    Tick {
+        /// The tracker state `s`.
+        tracker: Vec<f64>,
+        /// The planner state `p`.
+        planner: Point,
+        /// `d_obs` (`None`: nothing sensed).
+        d_obs: Option<f64>,
+        /// The planner speed bound to answer under.
+        beta: f64,
+    },
+    /// The same for several relative states (row-major, `n_state` each) under one `beta`.
+    Batch {
+        /// The relative states.
+        states: Vec<f64>,
+        /// The planner speed bound.
+        beta: f64,
+    },
+}
+
+/// The model's answer for one relative state.
+#[derive(Debug, Clone, PartialEq)]
+pub struct Answer {
+    /// The relative state as the model read it (periodic coordinates wrapped).
+    pub relative_state: Vec<f64>,
+    /// `V(r; beta)`.
+    pub value: f64,
+    /// `r` lies in the certified set of `beta` (`V <= set level`).
+    pub in_set: bool,
+    /// `r` lies in the trained domain.
+    pub in_domain: bool,
+    /// The optimal tracking control `u*`.
+    pub control: Vec<f64>,
+}
+
+/// What one step decided.
+#[derive(Debug, Clone, PartialEq)]
+pub struct StepReport {
+    /// Distance from the tracker to the nearest obstacle sensed so far (`None`: none sensed).
+    pub d_obs: Option<f64>,
+    /// The previous step's `beta_query`.
+    pub beta_old: f64,
+    /// This step's planner speed bound (`beta_old` on a hold).
+    pub beta_query: f64,
+    /// `dTEBmax`: the TEB radius at `beta_query`, the bound the tracking error must keep this step.
+    pub dteb_radius: f64,
+    /// The sTEB radius (at `beta_l`), by which obstacles are inflated.
+    pub steb_radius: f64,
+    /// True if the raw path was planned again at this step.
+    pub replanned: bool,
+    /// adjustPlannerControl's branch.
+    pub branch: Branch,
+    /// The planner state after the step, `p_next`.
+    pub planner: Point,
+    /// The optimal tracking control at `r_next = s - Q p_next` under `beta_query`.
+    pub control: Vec<f64>,
+    /// The relative state `r_next`.
+    pub relative_state: Vec<f64>,
+    /// `V(r_next; beta_query)`.
+    pub value: f64,
+    /// `r_next` lies in the certified set of `beta_query` (`V <= set level`), from which `dTEBmax` holds.
+    pub in_teb: bool,
+    /// `r_next` lies inside the model's trained domain.
+    pub in_domain: bool,
+    /// Questions asked of the model in this step (1 on the common branch).
+    pub round_trips: usize,
+}
+
+/// Why the core cannot take or finish a step.
+#[derive(Debug, Clone, PartialEq, thiserror::Error)]
+pub enum CoreError {
+    /// The raw path could not be planned.
+    #[error(transparent)]
+    Plan(#[from] PlanError),
+    /// The settings or the model cannot drive the loop.
+    #[error("{0}")]
+    Setup(String),
+    /// The tracker state does not fit the model.
+    #[error("tracker state: {0}")]
+    Tracker(String),
+    /// An answer does not fit its question.
+    #[error("the model's answer does not fit the question: {0}")]
+    Answer(String),
+    /// `beta_old` has no row in the table (the table changed under the loop).
+    #[error("beta_old = {beta_old} has no row in the table (its fastest is {beta_u})")]
+    NoRow {
+        /// The `beta` in force.
+        beta_old: f64,
+        /// The table's fastest `beta`.
+        beta_u: f64,
+    },
+}
+
+/// The I/O-free state of one robot's loop.
+pub struct LoopCore {
+    view: ModelView,
+    settings: CoreSettings,
+    beta_query: f64,
+    replan_flag: bool,
+    planner: Point,
+    raw_path: VecDeque<Point>,
+    obstacles: Vec<Obstacle>,
+    rng: StdRng,
+}
+
+/// Where a step stands between questions.
+#[derive(Debug, Clone)]
+enum Stage {
+    /// Waiting for the tick at `p_next`, the path consumed up to it.
+    Advance { p_next: Point, ahead: VecDeque<Point> },
+    /// Waiting for the tick at `p*`, the raw-path state `index` states along.
+    Keep { index: usize, p_star: Point },
+    /// Waiting for the batch of reset candidates.
+    Candidates { free: Vec<Point> },
+    /// Waiting for the tick at the chosen reset point.
+    Reset { candidate: Point },
+    /// Waiting for the held state's answer under the row answering for `beta_old`.
+    Hold { row: SpeedRow },
+}
+
+/// One step in progress: ask [`Step::query`], give the model's answers to [`Step::answer`].
+#[derive(Debug, Clone)]
+pub struct Step {
+    tracker: Vec<f64>,
+    position: Point,
+    d_obs: Option<f64>,
+    beta_old: f64,
+    speed: PlannerSpeed,
+    replanned: bool,
+    round_trips: usize,
+    stage: Stage,
+    query: Query,
+}
+
+/// What a step needs next.
+#[derive(Debug)]
+pub enum Progress {
+    /// Another question.
+    Ask(Step),
+    /// The step is decided; the core has taken it.
+    Done(StepReport),
+}
+
+impl LoopCore {
+    /// A loop with the planner at `start` (its initial state `p_0`) and `beta_u` in force.
+    pub fn new(view: ModelView, settings: CoreSettings, start: Point) -> Result<Self, CoreError> {
+        settings.check()?;
+        if view.planner_to_state.len() != 2 * view.n_state {
+            return Err(CoreError::Setup(format!(
+                "Q has {} entries; a 2-D planner in a {}-D state needs {}",
+                view.planner_to_state.len(),
+                view.n_state,
+                2 * view.n_state
+            )));
+        }
+        let beta_u =
+            view.speeds.last().map(|row| row.beta).ok_or_else(|| CoreError::Setup("empty TEB table".into()))?;
+        Ok(Self {
+            beta_query: beta_u,
+            replan_flag: true,
+            planner: start,
+            raw_path: VecDeque::new(),
+            obstacles: Vec::new(),
+            rng: StdRng::seed_from_u64(settings.seed),
+            view,
+            settings,
+        })
+    }
+
+    /// The planner's current state `p`.
+    pub fn planner(&self) -> Point {
+        self.planner
+    }
+
+    /// What is left of the raw path after the planner's state.
+    pub fn raw_path(&self) -> impl Iterator<Item = &Point> {
+        self.raw_path.iter()
+    }
+
+    /// The obstacles sensed so far.
+    pub fn obstacles(&self) -> &[Obstacle] {
+        &self.obstacles
+    }
+
+    /// The `beta` in force: the last step's `beta_query` (`beta_u` before the first step).
+    pub fn beta_in_force(&self) -> f64 {
+        self.beta_query
+    }
+
+    /// The model's table as the core reads it.
+    pub fn view(&self) -> &ModelView {
+        &self.view
+    }
+
+    /// Takes a new table (the model was reloaded) and plans again at the next step, whose sTEB may differ.
+    pub fn replace_table(&mut self, speeds: Vec<SpeedRow>) -> Result<(), CoreError> {
+        if speeds.is_empty() {
+            return Err(CoreError::Setup("empty TEB table".into()));
+        }
+        self.view.speeds = speeds;
+        self.replan_flag = true;
+        Ok(())
+    }
+
+    /// The tracker's position in the planner's plane, `Q^T s`.
+    pub fn tracker_position(&self, tracker: &[f64]) -> Point {
+        let q = &self.view.planner_to_state;
+        [0, 1].map(|j| (0..self.view.n_state).map(|i| q[2 * i + j] * tracker[i]).sum())
+    }
+
+    /// `r = s - Q p`.
+    pub fn relative_state(&self, tracker: &[f64], p: Point) -> Vec<f64> {
+        let q = &self.view.planner_to_state;
+        (0..self.view.n_state).map(|i| tracker[i] - q[2 * i] * p[0] - q[2 * i + 1] * p[1]).collect()
+    }
+
+    /// Begins the step for tracker state `tracker` and the obstacles sensed now: remembers them, applies
+    /// queryPlannerControl, replans when an obstacle is new or the replan flag is set, and asks the first
+    /// question.
+    pub fn begin(
+        &mut self,
+        tracker: &[f64],
+        sensed: &[Obstacle],
+        planner: &mut dyn RawPathPlanner,
+    ) -> Result<Step, CoreError> {
+        if tracker.len() != self.view.n_state {
+            return Err(CoreError::Tracker(format!(
+                "{} values; the model's state has {}",
+                tracker.len(),
+                self.view.n_state
+            )));
+        }
+        if let Some(i) = tracker.iter().position(|x| !x.is_finite()) {
+            return Err(CoreError::Tracker(format!("tracker[{i}] = {}; must be finite", tracker[i])));
+        }
+        let newly_sensed = remember(&mut self.obstacles, sensed);
+        let position = self.tracker_position(tracker);
+        let d_obs = (!self.obstacles.is_empty()).then(|| clearance(&self.obstacles, position));
+        let beta_old = self.beta_query;
+        let speed = query_planner_control(&self.view.speeds, d_obs);
+        // The flag stays set until a path is planned: a step that failed to plan plans again next time.
+        self.replan_flag |= newly_sensed;
+        let replanned = self.replan_flag;
+        if replanned {
+            let path = planner.plan(&PlanRequest {
+                start: self.planner,
+                goal: self.settings.goal,
+                obstacles: &self.obstacles,
+                inflation: speed.steb_radius,
+                bounds: self.settings.bounds,
+            })?;
+            self.raw_path = path.into_iter().skip(1).collect();
+            self.replan_flag = false;
+        }
+        let (stage, p) = if speed.beta < beta_old {
+            let (index, p_star) = self.closest_path_state(position);
+            (Stage::Keep { index, p_star }, p_star)
+        } else {
+            // The path is consumed only once the step is done: a step begun again (the table changed)
+            // starts from the same planner state and path.
+            let mut ahead = self.raw_path.clone();
+            let p_next = advance_along(self.planner, &mut ahead, speed.beta * self.settings.control_period);
+            (Stage::Advance { p_next, ahead }, p_next)
+        };
+        let query = Query::Tick { tracker: tracker.to_vec(), planner: p, d_obs, beta: speed.beta };
+        Ok(Step {
+            tracker: tracker.to_vec(),
+            position,
+            d_obs,
+            beta_old,
+            speed,
+            replanned,
+            round_trips: 1,
+            stage,
+            query,
+        })
+    }
+
+    /// `p*`: the state of the planner and the raw path closest to the tracker, with the number of raw-path
+    /// states before it (0: the planner's own state).
+    fn closest_path_state(&self, position: Point) -> (usize, Point) {
+        std::iter::once(self.planner)
+            .chain(self.raw_path.iter().copied())
+            .enumerate()
+            .min_by(|a, b| norm(sub(a.1, position)).total_cmp(&norm(sub(b.1, position))))
+            .unwrap_or((0, self.planner))
+    }
+
+    /// Free reset candidates: the tracker's own position first, then points drawn uniformly in the disc of
+    /// radius `dTEBmax` around it, those farther than the sTEB from every sensed obstacle.
+    fn reset_candidates(&mut self, position: Point, speed: &PlannerSpeed) -> Vec<Point> {
+        let mut free = Vec::with_capacity(self.settings.reset_candidates);
+        for k in 0..self.settings.reset_candidates {
+            let candidate = if k == 0 {
+                position
+            } else {
+                let (radius, angle) = (
+                    speed.dteb_radius * self.rng.random::<f64>().sqrt(),
+                    std::f64::consts::TAU * self.rng.random::<f64>(),
+                );
+                [position[0] + radius * angle.cos(), position[1] + radius * angle.sin()]
+            };
+            if clearance(&self.obstacles, candidate) > speed.steb_radius {
+                free.push(candidate);
+            }
+        }
+        free
+    }
+
+    /// The hold's question: the held planner state's relative state under the row answering for `beta_old`.
+    fn hold(&self, mut step: Step) -> Result<Progress, CoreError> {
+        // Only a table replaced under the loop can end below `beta_old`.
+        let beta_u = self.view.speeds.last().map_or(f64::NAN, |row| row.beta);
+        let row = row_for(&self.view.speeds, step.beta_old)
+            .map(|i| self.view.speeds[i])
+            .ok_or(CoreError::NoRow { beta_old: step.beta_old, beta_u })?;
+        step.query = Query::Batch { states: self.relative_state(&step.tracker, self.planner), beta: row.beta };
+        step.stage = Stage::Hold { row };
+        step.round_trips += 1;
+        Ok(Progress::Ask(step))
+    }
+
+    /// Finishes a step on `branch` with the planner at `p_next`, `answer` the model's at it, under `held`'s
+    /// row on a hold and the step's `beta_query` otherwise.
+    fn done(&mut self, step: Step, branch: Branch, p_next: Point, answer: Answer, held: Option<SpeedRow>) -> Progress {
+        let (beta_query, dteb_radius) = match held {
+            Some(row) => (row.beta, row.bound),
+            None => (step.speed.beta, step.speed.dteb_radius),
+        };
+        self.beta_query = beta_query;
+        self.planner = p_next;
+        Progress::Done(StepReport {
+            d_obs: step.d_obs,
+            beta_old: step.beta_old,
+            beta_query,
+            dteb_radius,
+            steb_radius: step.speed.steb_radius,
+            replanned: step.replanned,
+            branch,
+            planner: p_next,
+            control: answer.control,
+            relative_state: answer.relative_state,
+            value: answer.value,
+            in_teb: answer.in_set,
+            in_domain: answer.in_domain,
+            round_trips: step.round_trips,
+        })
+    }
+}
+
+impl Step {
+    /// What the step needs to know next.
+    pub fn query(&self) -> &Query {
+        &self.query
+    }
+
+    /// Gives the model's answers to [`Step::query`] (one per state asked about, in order) and returns the
+    /// next question or the decided step.
+    pub fn answer(mut self, core: &mut LoopCore, answers: Vec<Answer>) -> Result<Progress, CoreError> {
+        let asked = match &self.query {
+            Query::Tick { .. } => 1,
+            Query::Batch { states, .. } => states.len() / core.view.n_state,
+        };
+        if answers.len() != asked {
+            return Err(CoreError::Answer(format!("{} answers for {asked} states", answers.len())));
+        }
+        let mut answers = answers.into_iter();
+        let mut single = || answers.next().ok_or_else(|| CoreError::Answer("no answer".into()));
+        match std::mem::replace(&mut self.stage, Stage::Candidates { free: Vec::new() }) {
+            Stage::Advance { p_next, ahead } => {
+                let answer = single()?;
+                core.raw_path = ahead;
+                Ok(core.done(self, Branch::Advance, p_next, answer, None))
+            }
+            Stage::Keep { index, p_star } => {
+                let answer = single()?;
+                if answer.in_set {
+                    core.raw_path.drain(..index);
+                    return Ok(core.done(self, Branch::Keep, p_star, answer, None));
+                }
+                let free = core.reset_candidates(self.position, &self.speed);
+                if free.is_empty() {
+                    return core.hold(self);
+                }
+                let states = free.iter().flat_map(|&p| core.relative_state(&self.tracker, p)).collect();
+                self.query = Query::Batch { states, beta: self.speed.beta };
+                self.stage = Stage::Candidates { free };
+                self.round_trips += 1;
+                Ok(Progress::Ask(self))
+            }
+            Stage::Candidates { free } => {
+                // Inside the set and the trained domain: a membership read off an extrapolated value is no
+                // reset.
+                let chosen = free.into_iter().zip(answers).find_map(|(p, a)| (a.in_set && a.in_domain).then_some(p));
+                let Some(candidate) = chosen else {
+                    return core.hold(self);
+                };
+                self.query = Query::Tick {
+                    tracker: self.tracker.clone(),
+                    planner: candidate,
+                    d_obs: self.d_obs,
+                    beta: self.speed.beta,
+                };
+                self.stage = Stage::Reset { candidate };
+                self.round_trips += 1;
+                Ok(Progress::Ask(self))
+            }
+            Stage::Reset { candidate } => {
+                let answer = single()?;
+                core.raw_path.clear();
+                core.replan_flag = true;
+                Ok(core.done(self, Branch::Reset, candidate, answer, None))
+            }
+            Stage::Hold { row } => {
+                let answer = single()?;
+                let planner = core.planner;
+                Ok(core.done(self, Branch::Hold, planner, answer, Some(row)))
+            }
+        }
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// A planner that goes straight to the goal.
+    struct Straight;
+
+    impl RawPathPlanner for Straight {
+        fn plan(&mut self, request: &PlanRequest<'_>) -> Result<Vec<Point>, PlanError> {
+            Ok(vec![request.start, request.goal])
+        }
+    }
+
+    /// A table of `beta` 0.5 / 1.0 / 1.5 with bounds 0.5 / 1.0 / 1.5, the double integrator's `Q` in 2-D
+    /// (`s = (x, y, vx, vy)`).
+    fn core() -> LoopCore {
+        let speeds = [0.5, 1.0, 1.5].map(|b| SpeedRow { beta: b, bound: b }).to_vec();
+        let view = ModelView { speeds, planner_to_state: vec![1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0], n_state: 4 };
+        let settings = CoreSettings {
+            control_period: 0.1,
+            goal: [10.0, 0.0],
+            bounds: ([-20.0; 2], [20.0; 2]),
+            reset_candidates: 8,
+            seed: 3,
+        };
+        LoopCore::new(view, settings, [0.0, 0.0]).unwrap()
+    }
+
+    /// An answer for the relative state of `query`'s first state (or `r`), with membership `in_set`.
+    fn answer(r: Vec<f64>, in_set: bool) -> Answer {
+        Answer { relative_state: r, value: 0.1, in_set, in_domain: true, control: vec![0.0, 0.0] }
+    }
+
+    /// Runs a step to its end, answering ticks with `tick_in_set` and each batch item with `batch_in_set`.
+    fn run(
+        core: &mut LoopCore,
+        tracker: &[f64],
+        sensed: &[Obstacle],
+        tick_in_set: bool,
+        batch_in_set: bool,
+    ) -> (StepReport, Vec<Query>) {
+        let mut step = core.begin(tracker, sensed, &mut Straight).unwrap();
+        let mut asked = Vec::new();
+        loop {
+            let query = step.query().clone();
+            let answers = match &query {
+                Query::Tick { tracker, planner, .. } => {
+                    vec![answer(core.relative_state(tracker, *planner), tick_in_set)]
+                }
+                Query::Batch { states, .. } => states.chunks(4).map(|r| answer(r.to_vec(), batch_in_set)).collect(),
+            };
+            asked.push(query);
+            match step.answer(core, answers).unwrap() {
+                Progress::Ask(next) => step = next,
+                Progress::Done(report) => return (report, asked),
+            }
+        }
+    }
+
+    const OBSTACLE: Obstacle = Obstacle::Circle { center: [2.0, 0.0], radius: 0.5 };
+
+    #[test]
+    fn with_nothing_sensed_the_planner_advances_at_beta_u_with_one_question() {
+        let mut core = core();
+        let (report, asked) = run(&mut core, &[0.0; 4], &[], true, true);
+        assert_eq!((report.branch, report.beta_query, report.round_trips), (Branch::Advance, 1.5, 1));
+        assert!(report.replanned, "the first step plans");
+        assert!((report.planner[0] - 0.15).abs() < 1e-12 && report.planner[1] == 0.0, "{:?}", report.planner);
+        assert!(matches!(asked[..], [Query::Tick { beta, d_obs: None, .. }] if beta == 1.5));
+        assert_eq!(core.beta_in_force(), 1.5);
+    }
+
+    #[test]
+    fn a_drop_keeps_the_closest_path_state_when_the_set_holds_it() {
+        let mut core = core();
+        run(&mut core, &[0.0; 4], &[], true, true);
+        // 1.5 m from the obstacle's edge: half of it fits beta 0.5's bound only.
+        let (report, asked) = run(&mut core, &[0.1, 0.0, 0.0, 0.0], &[OBSTACLE], true, true);
+        assert_eq!(
+            (report.branch, report.beta_old, report.beta_query, report.dteb_radius),
+            (Branch::Keep, 1.5, 0.5, 0.5)
+        );
+        assert_eq!(asked.len(), 1);
+        assert_eq!(core.beta_in_force(), 0.5);
+    }
+
+    #[test]
+    fn a_drop_outside_the_set_resets_into_it_and_plans_again() {
+        let mut core = core();
+        run(&mut core, &[0.0; 4], &[], true, true);
+        let (report, asked) = run(&mut core, &[0.1, 0.0, 0.0, 0.0], &[OBSTACLE], false, true);
+        assert_eq!((report.branch, report.beta_query, report.round_trips), (Branch::Reset, 0.5, 3));
+        assert!(matches!(asked[1], Query::Batch { beta, .. } if beta == 0.5));
+        // The tracker's own position is the first candidate, and it was free.
+        assert_eq!(report.planner, [0.1, 0.0]);
+        assert_eq!(core.raw_path().count(), 0);
+        let (next, _) = run(&mut core, &[0.1, 0.0, 0.0, 0.0], &[OBSTACLE], true, true);
+        assert!(next.replanned, "a reset flags a replan");
+    }
+
+    #[test]
+    fn a_drop_with_no_state_in_the_set_holds_under_beta_old() {
+        let mut core = core();
+        run(&mut core, &[0.0; 4], &[], true, true);
+        let planner = core.planner();
+        let (report, asked) = run(&mut core, &[0.1, 0.0, 2.0, 0.0], &[OBSTACLE], false, false);
+        assert_eq!((report.branch, report.beta_query, report.dteb_radius), (Branch::Hold, 1.5, 1.5));
+        assert_eq!(report.planner, planner, "the planner waits");
+        assert!(matches!(asked.last(), Some(Query::Batch { beta, .. }) if *beta == 1.5));
+        assert_eq!(core.beta_in_force(), 1.5, "beta_old stays in force");
+    }
+
+    #[test]
+    fn wrong_answers_and_trackers_are_errors_not_panics() {
+        let mut core = core();
+        let step = core.begin(&[0.0; 4], &[], &mut Straight).unwrap();
+        assert!(matches!(step.clone().answer(&mut core, Vec::new()), Err(CoreError::Answer(_))));
+        assert!(matches!(step.answer(&mut core, vec![answer(vec![0.0; 4], true); 2]), Err(CoreError::Answer(_))));
+        assert!(matches!(core.begin(&[0.0; 3], &[], &mut Straight), Err(CoreError::Tracker(_))));
+        assert!(matches!(core.begin(&[f64::NAN; 4], &[], &mut Straight), Err(CoreError::Tracker(_))));
+        assert_eq!(core.planner(), [0.0, 0.0], "an unfinished step leaves the planner where it was");
+    }
+}
