@@ -1,10 +1,12 @@
 //! Bearer-token authentication: an interceptor per service checks `authorization: Bearer <token>` against
-//! the configured tokens; admin services need an `admin` token. Tokens are kept only as SHA-256 digests.
+//! the configured tokens; admin services need an `admin` token. Tokens are kept only as SHA-256 digests, and
+//! a presented token's digest is compared with every configured one in constant time, so how long a check
+//! takes says nothing about which token, or how much of one, matched.
 
 use crate::metrics::Metrics;
 use sha2::{Digest, Sha256};
-use std::collections::HashMap;
 use std::sync::Arc;
+use subtle::ConstantTimeEq;
 use tonic::{Request, Status};
 
 /// What a token may do.
@@ -29,7 +31,7 @@ pub struct TokenError {
 /// The configured tokens; empty means authentication is off.
 #[derive(Debug, Default)]
 pub struct Tokens {
-    by_digest: HashMap<[u8; 32], Role>,
+    digests: Vec<([u8; 32], Role)>,
 }
 
 fn digest(token: &str) -> [u8; 32] {
@@ -39,7 +41,7 @@ fn digest(token: &str) -> [u8; 32] {
 impl Tokens {
     /// Parses `role:token` entries; blank entries and `#` comments are skipped.
     pub fn parse(entries: &[String]) -> Result<Tokens, TokenError> {
-        let mut by_digest = HashMap::new();
+        let mut digests: Vec<([u8; 32], Role)> = Vec::new();
         for (i, entry) in entries.iter().enumerate() {
             let entry = entry.trim();
             if entry.is_empty() || entry.starts_with('#') {
@@ -56,24 +58,36 @@ impl Tokens {
             if token.len() < 8 {
                 return Err(fail("token shorter than 8 characters"));
             }
-            by_digest.insert(digest(token), role);
+            let token_digest = digest(token);
+            match digests.iter_mut().find(|(d, _)| *d == token_digest) {
+                Some(entry) => entry.1 = role,
+                None => digests.push((token_digest, role)),
+            }
         }
-        Ok(Tokens { by_digest })
+        Ok(Tokens { digests })
     }
 
     /// True when no token is configured (every call is allowed).
     pub fn is_empty(&self) -> bool {
-        self.by_digest.is_empty()
+        self.digests.is_empty()
     }
 
     /// Number of tokens per role: (user, admin).
     pub fn counts(&self) -> (usize, usize) {
-        let admins = self.by_digest.values().filter(|r| **r == Role::Admin).count();
-        (self.by_digest.len() - admins, admins)
+        let admins = self.digests.iter().filter(|(_, r)| *r == Role::Admin).count();
+        (self.digests.len() - admins, admins)
     }
 
     fn role_of(&self, token: &str) -> Option<Role> {
-        self.by_digest.get(&digest(token)).copied()
+        let presented = digest(token);
+        // Every entry is compared, whatever matched before: no early exit.
+        let mut found = None;
+        for (configured, role) in &self.digests {
+            if bool::from(configured.ct_eq(&presented)) {
+                found = Some(*role);
+            }
+        }
+        found
     }
 }
 
@@ -139,5 +153,8 @@ mod tests {
         assert!(e.to_string().contains("unknown role"));
         assert!(Tokens::parse(&["user:short".into()]).is_err());
         assert!(Tokens::parse(&["userabcdefgh".into()]).is_err());
+        // A token given twice counts once, with its last role.
+        let twice = Tokens::parse(&["user:abcdefgh".into(), "admin:abcdefgh".into()]).unwrap();
+        assert_eq!((twice.counts(), twice.role_of("abcdefgh")), ((0, 1), Some(Role::Admin)));
     }
 }

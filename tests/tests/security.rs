@@ -31,7 +31,8 @@ async fn tokens_authenticate_users_and_authorise_admins() {
     let repo = repository();
     let tokens = repo.path().join("tokens");
     std::fs::write(&tokens, format!("# fleet\nuser:{USER}\nadmin:{ADMIN}\n")).unwrap();
-    let (server, _) = TestServer::start_observed(repo.path(), &["--tokens-file", tokens.to_str().unwrap()]).await;
+    let args = ["--tokens-file", tokens.to_str().unwrap(), "--log-level", "debug"];
+    let (server, _) = TestServer::start_observed(repo.path(), &args).await;
     let endpoint = server.endpoint.clone();
     let anonymous = server.client().await;
     let wrong = server.client_with(&endpoint, options(Some("not-a-valid-token"), None)).await;
@@ -63,6 +64,12 @@ async fn tokens_authenticate_users_and_authorise_admins() {
     let refused = server.metric(r#"fastrack_auth_failures_total{code="UNAUTHENTICATED"}"#).await;
     assert!(refused >= 4.0, "auth failures counted: {refused}");
     assert_eq!(server.metric(r#"fastrack_auth_failures_total{code="PERMISSION_DENIED"}"#).await, 1.0);
+    // No token, right or wrong, reaches the log, even at debug level.
+    let log = server.log_text();
+    assert!(log.contains("call refused"), "the refusals are logged");
+    for secret in [USER, ADMIN, "not-a-valid-token"] {
+        assert!(!log.contains(secret), "the log holds a token");
+    }
 }
 
 /// A CA, a server certificate for `localhost` and a client certificate, as PEM files in `dir`.
@@ -145,5 +152,11 @@ async fn tls_and_mutual_tls_connections() {
         Ok(c) => c.list_models().await.is_err(),
     };
     assert!(stranger_failed, "a client without a certificate must be refused under mutual TLS");
-    assert!(server.log_text().contains("tls=\"mutual\"") || server.log_text().contains("tls=mutual"));
+    let log = server.log_text();
+    assert!(log.contains("tls=\"mutual\"") || log.contains("tls=mutual"));
+    // No certificate or key content reaches the log.
+    let pem_body = |pem: &[u8]| String::from_utf8_lossy(pem).lines().nth(1).unwrap_or_default().to_string();
+    for secret in [pem_body(&pki.client_key), pem_body(&pki.client_cert), "PRIVATE KEY".to_string()] {
+        assert!(!secret.is_empty() && !log.contains(&secret), "the log holds certificate or key content");
+    }
 }
