@@ -23,8 +23,13 @@ use std::collections::VecDeque;
 #[derive(Debug, Clone, Copy, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum Branch {
-    /// `beta_query >= beta_old`: the planner moved along the raw path.
+    /// `beta_query >= beta_old`: the planner moved along the raw path (at `beta_query`, whose certified set
+    /// holds the new relative state whenever `beta_query > beta_old`).
     Advance,
+    /// `beta_query > beta_old` but the new relative state lies outside the faster row's certified set: the
+    /// planner moved along the raw path at `beta_old`, whose row stays in force; the rise is tried again at
+    /// the next step.
+    Steady,
     /// `beta_query < beta_old` and `s - Q p*` in the certified set of `beta_query`: the planner jumped to `p*`.
     Keep,
     /// `beta_query < beta_old` and `s - Q p*` outside that set: the planner was reset into it, a replan flagged.
@@ -40,6 +45,7 @@ impl Branch {
     pub fn name(self) -> &'static str {
         match self {
             Branch::Advance => "advance",
+            Branch::Steady => "steady",
             Branch::Keep => "keep",
             Branch::Reset => "reset",
             Branch::Hold => "hold",
@@ -56,7 +62,15 @@ pub struct ModelView {
     pub planner_to_state: Vec<f64>,
     /// State coordinates.
     pub n_state: usize,
+    /// The horizon over which verification certified the rows (s): from a relative state in a row's
+    /// certified set, the error stays within its bound for this long while the planner obeys its `beta`
+    /// (`None`: an unverified table, no certificate to keep).
+    pub certificate_horizon: Option<f64>,
 }
+
+/// Share of the certificate horizon after which a loop whose relative state stayed outside the certified
+/// set of the row in force moves the planner back into it.
+pub const REANCHOR_SHARE: f64 = 0.5;
 
 /// How the core runs.
 #[derive(Debug, Clone, Copy, PartialEq)]
@@ -159,6 +173,10 @@ pub struct StepReport {
     pub in_domain: bool,
     /// Questions asked of the model in this step (1 on the common branch).
     pub round_trips: usize,
+    /// Seconds since the relative state last lay in the certified set of the row in force, with that row in
+    /// force since (0 when it lies there now): the certificate from that state covers this step while it is
+    /// below the certificate horizon.
+    pub certificate_age: f64,
 }
 
 /// Why the core cannot take or finish a step.
@@ -191,6 +209,7 @@ pub struct LoopCore {
     view: ModelView,
     settings: CoreSettings,
     beta_query: f64,
+    certificate_age: f64,
     replan_flag: bool,
     planner: Point,
     raw_path: VecDeque<Point>,
@@ -201,8 +220,10 @@ pub struct LoopCore {
 /// Where a step stands between questions.
 #[derive(Debug, Clone)]
 enum Stage {
-    /// Waiting for the tick at `p_next`, the path consumed up to it.
-    Advance { p_next: Point, ahead: VecDeque<Point> },
+    /// Waiting for the tick at `p_next`, the path consumed up to it; `rising` when `beta_query > beta_old`.
+    Advance { p_next: Point, ahead: VecDeque<Point>, rising: bool },
+    /// Waiting for the answer at `p_next` moved at `beta_old`, under `row` (a refused rise).
+    Steady { p_next: Point, ahead: VecDeque<Point>, row: SpeedRow },
     /// Waiting for the tick at `p*`, the raw-path state `index` states along.
     Keep { index: usize, p_star: Point },
     /// Waiting for the batch of reset candidates.
@@ -252,6 +273,8 @@ impl LoopCore {
             view.speeds.last().map(|row| row.beta).ok_or_else(|| CoreError::Setup("empty TEB table".into()))?;
         Ok(Self {
             beta_query: beta_u,
+            // The robot starts at rest on the planner.
+            certificate_age: 0.0,
             replan_flag: true,
             planner: start,
             raw_path: VecDeque::new(),
@@ -347,18 +370,7 @@ impl LoopCore {
             self.raw_path = path.into_iter().skip(1).collect();
             self.replan_flag = false;
         }
-        let (stage, p) = if speed.beta < beta_old {
-            let (index, p_star) = self.closest_path_state(position);
-            (Stage::Keep { index, p_star }, p_star)
-        } else {
-            // The path is consumed only once the step is done: a step begun again (the table changed)
-            // starts from the same planner state and path.
-            let mut ahead = self.raw_path.clone();
-            let p_next = advance_along(self.planner, &mut ahead, speed.beta * self.settings.control_period);
-            (Stage::Advance { p_next, ahead }, p_next)
-        };
-        let query = Query::Tick { tracker: tracker.to_vec(), planner: p, d_obs, beta: speed.beta };
-        Ok(Step {
+        let mut step = Step {
             tracker: tracker.to_vec(),
             position,
             d_obs,
@@ -366,9 +378,44 @@ impl LoopCore {
             speed,
             replanned,
             round_trips: 1,
-            stage,
-            query,
-        })
+            stage: Stage::Candidates { free: Vec::new() },
+            query: Query::Batch { states: Vec::new(), beta: speed.beta },
+        };
+        let stale = self.view.certificate_horizon.is_some_and(|t| self.certificate_age >= REANCHOR_SHARE * t);
+        if speed.beta == beta_old && stale {
+            // The relative state has stayed outside the row's certified set for half the horizon: move the
+            // planner back into it (a reset at the same beta), or hold if no free point is in it.
+            step.round_trips = 0;
+            return self.ask_candidates(step);
+        }
+        let p = if speed.beta < beta_old {
+            let (index, p_star) = self.closest_path_state(position);
+            step.stage = Stage::Keep { index, p_star };
+            p_star
+        } else {
+            // The path is consumed only once the step is done: a step begun again (the table changed)
+            // starts from the same planner state and path.
+            let mut ahead = self.raw_path.clone();
+            let p_next = advance_along(self.planner, &mut ahead, speed.beta * self.settings.control_period);
+            step.stage = Stage::Advance { p_next, ahead, rising: speed.beta > beta_old };
+            p_next
+        };
+        step.query = Query::Tick { tracker: tracker.to_vec(), planner: p, d_obs, beta: speed.beta };
+        Ok(step)
+    }
+
+    /// Asks about the free reset candidates around the tracker under the step's `beta_query`, or holds if
+    /// none is free.
+    fn ask_candidates(&mut self, mut step: Step) -> Result<Step, CoreError> {
+        let free = self.reset_candidates(step.position, &step.speed);
+        if free.is_empty() {
+            return self.hold(step);
+        }
+        let states = free.iter().flat_map(|&p| self.relative_state(&step.tracker, p)).collect();
+        step.query = Query::Batch { states, beta: step.speed.beta };
+        step.stage = Stage::Candidates { free };
+        step.round_trips += 1;
+        Ok(step)
     }
 
     /// `p*`: the state of the planner and the raw path closest to the tracker, with the number of raw-path
@@ -403,7 +450,7 @@ impl LoopCore {
     }
 
     /// The hold's question: the held planner state's relative state under the row answering for `beta_old`.
-    fn hold(&self, mut step: Step) -> Result<Progress, CoreError> {
+    fn hold(&self, mut step: Step) -> Result<Step, CoreError> {
         // Only a table replaced under the loop can end below `beta_old`.
         let beta_u = self.view.speeds.last().map_or(f64::NAN, |row| row.beta);
         let row = row_for(&self.view.speeds, step.beta_old)
@@ -412,7 +459,7 @@ impl LoopCore {
         step.query = Query::Batch { states: self.relative_state(&step.tracker, self.planner), beta: row.beta };
         step.stage = Stage::Hold { row };
         step.round_trips += 1;
-        Ok(Progress::Ask(step))
+        Ok(step)
     }
 
     /// Finishes a step on `branch` with the planner at `p_next`, `answer` the model's at it, under `held`'s
@@ -424,6 +471,9 @@ impl LoopCore {
         };
         self.beta_query = beta_query;
         self.planner = p_next;
+        // Every branch that changes the row in force puts the relative state in the new row's set, so the age
+        // counts from there; on the others the row stays.
+        self.certificate_age = if answer.in_set { 0.0 } else { self.certificate_age + self.settings.control_period };
         Progress::Done(StepReport {
             d_obs: step.d_obs,
             beta_old: step.beta_old,
@@ -439,6 +489,7 @@ impl LoopCore {
             in_teb: answer.in_set,
             in_domain: answer.in_domain,
             round_trips: step.round_trips,
+            certificate_age: self.certificate_age,
         })
     }
 }
@@ -462,10 +513,28 @@ impl Step {
         let mut answers = answers.into_iter();
         let mut single = || answers.next().ok_or_else(|| CoreError::Answer("no answer".into()));
         match std::mem::replace(&mut self.stage, Stage::Candidates { free: Vec::new() }) {
-            Stage::Advance { p_next, ahead } => {
+            Stage::Advance { p_next, ahead, rising } => {
                 let answer = single()?;
+                if rising && !answer.in_set {
+                    // The faster row's certificate does not cover the new state: move at beta_old instead,
+                    // under its row, whose certificate still runs.
+                    let row = row_for(&core.view.speeds, self.beta_old)
+                        .map(|i| core.view.speeds[i])
+                        .ok_or(CoreError::NoRow { beta_old: self.beta_old, beta_u: self.speed.beta })?;
+                    let mut ahead = core.raw_path.clone();
+                    let p_next = advance_along(core.planner, &mut ahead, row.beta * core.settings.control_period);
+                    self.query = Query::Batch { states: core.relative_state(&self.tracker, p_next), beta: row.beta };
+                    self.stage = Stage::Steady { p_next, ahead, row };
+                    self.round_trips += 1;
+                    return Ok(Progress::Ask(self));
+                }
                 core.raw_path = ahead;
                 Ok(core.done(self, Branch::Advance, p_next, answer, None))
+            }
+            Stage::Steady { p_next, ahead, row } => {
+                let answer = single()?;
+                core.raw_path = ahead;
+                Ok(core.done(self, Branch::Steady, p_next, answer, Some(row)))
             }
             Stage::Keep { index, p_star } => {
                 let answer = single()?;
@@ -473,22 +542,14 @@ impl Step {
                     core.raw_path.drain(..index);
                     return Ok(core.done(self, Branch::Keep, p_star, answer, None));
                 }
-                let free = core.reset_candidates(self.position, &self.speed);
-                if free.is_empty() {
-                    return core.hold(self);
-                }
-                let states = free.iter().flat_map(|&p| core.relative_state(&self.tracker, p)).collect();
-                self.query = Query::Batch { states, beta: self.speed.beta };
-                self.stage = Stage::Candidates { free };
-                self.round_trips += 1;
-                Ok(Progress::Ask(self))
+                core.ask_candidates(self).map(Progress::Ask)
             }
             Stage::Candidates { free } => {
                 // Inside the set and the trained domain: a membership read off an extrapolated value is no
                 // reset.
                 let chosen = free.into_iter().zip(answers).find_map(|(p, a)| (a.in_set && a.in_domain).then_some(p));
                 let Some(candidate) = chosen else {
-                    return core.hold(self);
+                    return core.hold(self).map(Progress::Ask);
                 };
                 self.query = Query::Tick {
                     tracker: self.tracker.clone(),
@@ -532,7 +593,12 @@ mod tests {
     /// (`s = (x, y, vx, vy)`).
     fn core() -> LoopCore {
         let speeds = [0.5, 1.0, 1.5].map(|b| SpeedRow { beta: b, bound: b }).to_vec();
-        let view = ModelView { speeds, planner_to_state: vec![1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0], n_state: 4 };
+        let view = ModelView {
+            speeds,
+            planner_to_state: vec![1.0, 0.0, 0.0, 1.0, 0.0, 0.0, 0.0, 0.0],
+            n_state: 4,
+            certificate_horizon: Some(1.0),
+        };
         let settings = CoreSettings {
             control_period: 0.1,
             goal: [10.0, 0.0],
@@ -625,6 +691,48 @@ mod tests {
         assert_eq!(report.planner, planner, "the planner waits");
         assert!(matches!(asked.last(), Some(Query::Batch { beta, .. }) if *beta == 1.5));
         assert_eq!(core.beta_in_force(), 1.5, "beta_old stays in force");
+    }
+
+    #[test]
+    fn a_rise_whose_state_the_faster_set_does_not_hold_moves_at_beta_old() {
+        let mut core = core();
+        run(&mut core, &[0.0; 4], &[], true, true);
+        run(&mut core, &[0.1, 0.0, 0.0, 0.0], &[OBSTACLE], true, true);
+        assert_eq!(core.beta_in_force(), 0.5);
+        // Far from the obstacle: the rule allows 1.5 again, but the state lies outside that row's set.
+        let planner = core.planner();
+        let far = [-20.0, 0.0, 0.0, 0.0];
+        let (report, asked) = run(&mut core, &far, &[], false, true);
+        assert_eq!(
+            (report.branch, report.beta_old, report.beta_query, report.dteb_radius),
+            (Branch::Steady, 0.5, 0.5, 0.5)
+        );
+        assert!(matches!(asked[..], [Query::Tick { beta: 1.5, .. }, Query::Batch { beta: 0.5, .. }]), "{asked:?}");
+        let moved = norm(sub(report.planner, planner));
+        assert!(moved > 0.0 && moved <= 0.5 * 0.1 * 2f64.sqrt() + 1e-12, "moved {moved} at beta_old");
+        assert_eq!(core.beta_in_force(), 0.5);
+        // Once the faster set holds it, the rise is taken.
+        let (report, _) = run(&mut core, &far, &[], true, true);
+        assert_eq!((report.branch, report.beta_query), (Branch::Advance, 1.5));
+    }
+
+    #[test]
+    fn a_state_outside_the_set_for_half_the_horizon_is_moved_back_into_it() {
+        let mut core = core();
+        // Horizon 1 s, control period 0.1 s: five steps outside the set age the certificate to 0.5 s.
+        let ages: Vec<f64> = (0..5).map(|_| run(&mut core, &[0.0; 4], &[], false, true).0.certificate_age).collect();
+        assert!(ages.iter().zip(1..).all(|(a, k)| (a - 0.1 * f64::from(k)).abs() < 1e-9), "{ages:?}");
+        let (report, asked) = run(&mut core, &[0.0; 4], &[], true, true);
+        assert_eq!((report.branch, report.beta_query, report.certificate_age), (Branch::Reset, 1.5, 0.0));
+        assert!(matches!(asked[..], [Query::Batch { beta: 1.5, .. }, Query::Tick { beta: 1.5, .. }]), "{asked:?}");
+        // With no candidate in the set, the planner holds instead (and the age goes on).
+        for _ in 0..5 {
+            run(&mut core, &[0.0; 4], &[], false, true);
+        }
+        let planner = core.planner();
+        let (report, _) = run(&mut core, &[0.0; 4], &[], false, false);
+        assert_eq!((report.branch, report.planner), (Branch::Hold, planner));
+        assert!((report.certificate_age - 0.6).abs() < 1e-9, "{}", report.certificate_age);
     }
 
     #[test]

@@ -97,6 +97,11 @@ impl From<CoreError> for LoopError {
     }
 }
 
+/// The horizon over which the model's rows were verified: the shortest of them (`None`: no row verified).
+pub fn certificate_horizon(info: &pb::ModelInfo) -> Option<f64> {
+    info.teb_table.iter().filter_map(|row| row.verification.as_ref().map(|v| v.horizon)).reduce(f64::min)
+}
+
 /// The online loop of one robot: [`LoopCore`]'s decisions, answered by the server over one `Track` stream.
 pub struct OnlineLoop {
     client: FastrackClient,
@@ -130,6 +135,7 @@ impl OnlineLoop {
             speeds: info.teb_table.iter().map(SpeedRow::from).collect(),
             planner_to_state: info.planner_to_state.clone(),
             n_state: info.state.len(),
+            certificate_horizon: certificate_horizon(&info),
         };
         let core = LoopCore::new(view, core_settings, start)?;
         let stream = client.track(settings.model.clone(), 0.0).await?;

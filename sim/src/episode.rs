@@ -137,6 +137,10 @@ pub struct Run {
     pub round_trips: usize,
     /// Control periods whose control was read outside the model's trained domain (extrapolated).
     pub out_of_domain: usize,
+    /// Control periods the certificate did not cover: the relative state had stayed outside the certified
+    /// set of the row in force for the verification horizon or longer.
+    #[serde(default)]
+    pub uncertified_steps: usize,
     /// The method's decision time per control period, server calls included.
     #[serde(with = "nanoseconds")]
     pub decision_times: Vec<Duration>,
@@ -162,6 +166,7 @@ pub struct Simulator {
     n_params: usize,
     control_period: f64,
     sensor: RangeSensor,
+    certificate_horizon: Option<f64>,
 }
 
 impl Simulator {
@@ -197,6 +202,7 @@ impl Simulator {
             n_params: info.params.len(),
             control_period,
             sensor,
+            certificate_horizon: fastrack_online::online_loop::certificate_horizon(&info),
         })
     }
 
@@ -268,6 +274,7 @@ impl Simulator {
             held_steps: 0,
             round_trips: 0,
             out_of_domain: 0,
+            uncertified_steps: 0,
             decision_times: Vec::new(),
             sensor_range: self.sensor.range,
             steb_radius: self.steb_radius(),
@@ -311,6 +318,9 @@ impl Simulator {
             run.held_steps += usize::from(decision.held);
             run.round_trips += decision.round_trips;
             run.out_of_domain += usize::from(decision.out_of_domain);
+            if let (Some(age), Some(horizon)) = (decision.certificate_age, self.certificate_horizon) {
+                run.uncertified_steps += usize::from(age >= horizon);
+            }
             run.visits.extend(decision.visit.take());
             if let Some(disturbance) = &settings.disturbance {
                 if (t / disturbance.period).floor() != ((t - control_period) / disturbance.period).floor() || k == 0 {

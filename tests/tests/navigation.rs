@@ -43,6 +43,8 @@ async fn parametric_fastrack_reaches_every_goal_safely_on_twenty_worlds() {
         );
         assert!(done.samples.iter().all(|s| s.bound.is_some() && s.error.is_some()), "every period checked");
         assert_eq!(done.out_of_domain, 0, "world {}: controls read outside the trained domain", i + 1);
+        assert_eq!(done.uncertified_steps, 0, "world {}: steps past the certificate's horizon", i + 1);
+        assert_eq!(done.visits.len(), done.samples.len(), "world {}: a visit recorded per period", i + 1);
         runs.push(done);
     }
     let all: Vec<&Run> = runs.iter().collect();

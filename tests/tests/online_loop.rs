@@ -171,7 +171,7 @@ async fn the_loop_never_keeps_or_resets_outside_the_certified_set() {
                 }
             }
             Branch::Hold => assert_eq!(step.beta_query, step.beta_old),
-            Branch::Advance => panic!("a drop in beta is never an advance: {step:?}"),
+            Branch::Advance | Branch::Steady => panic!("a drop in beta is never an advance: {step:?}"),
         }
         branches.push(step.branch);
     }

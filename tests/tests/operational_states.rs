@@ -67,7 +67,10 @@ async fn the_loops_visits_are_recorded_and_verified_as_the_operational_distribut
             checked.push(numbers);
         }
     }
-    assert!(branches.keys().all(|b| ["advance", "keep", "reset", "hold"].contains(&b.as_str())), "{branches:?}");
+    assert!(
+        branches.keys().all(|b| ["advance", "steady", "keep", "reset", "hold"].contains(&b.as_str())),
+        "{branches:?}"
+    );
     assert!(branches.get("advance").is_some_and(|&n| n > 100), "{branches:?}");
     if !checked.is_empty() {
         let states = checked.iter().flat_map(|n| n[1..].to_vec()).collect();

@@ -434,6 +434,9 @@ def test_speed_choice_agrees_with_query_planner_control(client: fastrack.Client)
             served = client.query_planner_control(MODEL, step.d_obs)
             if step.branch == "hold":  # the old row stays in force, above the rule's choice
                 assert step.beta_query == step.beta_old > served.beta_query, k
+            elif step.branch == "steady":  # a refused rise: the old row stays in force, below the rule's choice
+                assert step.beta_query == step.beta_old < served.beta_query, k
+                assert step.dteb_radius < served.dteb_radius, k
             else:
                 assert (step.beta_query, step.dteb_radius, step.steb_radius) == (
                     served.beta_query,

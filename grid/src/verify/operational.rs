@@ -3,11 +3,11 @@
 //! lie in the round's set.
 //!
 //! The file is CSV: a header `branch,beta,<the model's state coordinates, in order>` and one line per control
-//! period, the branch of adjustPlannerControl that placed the planner (`advance`, `keep`, `reset`, `hold`),
-//! the `beta` whose row was in force, and the relative state the control was read at. Every recorded state
-//! that lies in a row's set `{V <= c}` (and in the trained domain) is one the loop may hand that row, whichever
-//! row was in force when it was recorded, so the check draws from all of them: `N` independent draws, with
-//! replacement, from the empirical distribution of the recorded states inside the set.
+//! period, the branch of adjustPlannerControl that placed the planner (`advance`, `steady`, `keep`, `reset`,
+//! `hold`), the `beta` whose row was in force, and the relative state the control was read at. Every recorded
+//! state that lies in a row's set `{V <= c}` (and in the trained domain) is one the loop may hand that row,
+//! whichever row was in force when it was recorded, so the check draws from all of them: `N` independent
+//! draws, with replacement, from the empirical distribution of the recorded states inside the set.
 
 use super::VerifyError;
 use fastrack_valuefn::runtime::Evaluator;
@@ -64,8 +64,11 @@ impl RecordedStates {
                 return Err(format!("line {}: {} fields; expected {}", index + 1, fields.len(), expected.len()));
             }
             let branch = fields[0];
-            if !matches!(branch, "advance" | "keep" | "reset" | "hold") {
-                return Err(format!("line {}: branch `{branch}`; expected advance, keep, reset or hold", index + 1));
+            if !matches!(branch, "advance" | "steady" | "keep" | "reset" | "hold") {
+                return Err(format!(
+                    "line {}: branch `{branch}`; expected advance, steady, keep, reset or hold",
+                    index + 1
+                ));
             }
             for (name, field) in expected.iter().zip(&fields).skip(1) {
                 let value: f64 =

@@ -133,6 +133,7 @@ impl LevelPlanner {
             reset: false,
             held: false,
             visit: None,
+            certificate_age: None,
             round_trips: 1,
             out_of_domain: !in_domain,
         })

@@ -96,6 +96,9 @@ pub struct Decision {
     pub out_of_domain: bool,
     /// The relative state the online loop's control was read at, with its branch (Parametric FaSTrack).
     pub visit: Option<Visit>,
+    /// Seconds since the relative state last lay in the certified set of the row in force (Parametric
+    /// FaSTrack).
+    pub certificate_age: Option<f64>,
 }
 
 /// Why a method cannot go on.

@@ -113,6 +113,7 @@ impl Mppi {
             reset: false,
             held: false,
             visit: None,
+            certificate_age: None,
             round_trips: 0,
             out_of_domain: false,
         })

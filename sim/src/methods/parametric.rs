@@ -40,6 +40,7 @@ impl Parametric {
             held: report.branch == Branch::Hold,
             round_trips: report.round_trips,
             out_of_domain: !report.in_domain,
+            certificate_age: Some(report.certificate_age),
             visit: Some(Visit { branch: report.branch, beta: report.beta_query, state: report.relative_state }),
         })
     }

@@ -17,8 +17,11 @@ Each :meth:`OnlineLoop.step` takes the tracker state and the obstacles sensed no
    replan (branch ``"reset"``), else (no such point: the tracker's speed or heading
    lies outside the smaller set) holds: the planner waits where it is with ``beta_old`` and its bound still
    in force, and the drop is tried again at the next step (branch ``"hold"``); otherwise moves the planner
-   along the raw path for one control period, each axis at most ``beta_query dt`` (branch ``"advance"``);
-5. reads ``u*`` at ``r_next = s - Q p_next`` under ``beta_query`` (``beta_old`` on a hold).
+   along the raw path for one control period, each axis at most ``beta_query dt`` (branch ``"advance"``),
+   except on a rise whose new relative state the faster row's certified set does not hold: then it moves at
+   ``beta_old``, whose row stays in force (branch ``"steady"``); and when the relative state has stayed outside
+   the certified set of the row in force for half the verification horizon, it is reset into it (or holds);
+5. reads ``u*`` at ``r_next = s - Q p_next`` under ``beta_query`` (``beta_old`` on a hold or a steady step).
 
 The tick that carries ``p_next`` (or the candidate ``p*``) returns ``beta_query``, the bound's membership
 and ``u*`` together, so the common branch costs one round trip; a reset asks about all its candidates in
@@ -70,9 +73,11 @@ from .results import TrackReply
 from .track import TrackStream
 from .v1 import models_pb2
 
-Branch = Literal["advance", "keep", "reset", "hold"]
+Branch = Literal["advance", "steady", "keep", "reset", "hold"]
 """adjustPlannerControl's branch: ``"advance"`` (``beta_query >= beta_old``: the planner moved along the raw
-path), ``"keep"`` (``beta_query < beta_old`` and ``s - Q p*`` in the certified set of ``beta_query``: the
+path; on a rise only when the faster row's certified set holds the new relative state), ``"steady"``
+(``beta_query > beta_old`` but that set does not hold it: the planner moved at ``beta_old``, whose row stays
+in force), ``"keep"`` (``beta_query < beta_old`` and ``s - Q p*`` in the certified set of ``beta_query``: the
 planner jumped to ``p*``), ``"reset"`` (``s - Q p*`` outside it: the planner was reset to a free point inside
 it, a replan flagged), ``"hold"`` (no free point within ``dTEBmax`` of the tracker puts the relative state in
 it: the planner waited where it is, ``beta_old`` and its bound still in force)."""
@@ -180,6 +185,19 @@ def query_planner_control(rows: Sequence[SpeedRow], d_obs: float | None) -> Plan
         steb_radius=steb_radius,
         steb_exceeds_half_distance=d_obs is not None and steb_radius > d_obs / 2.0,
     )
+
+
+REANCHOR_SHARE = 0.5
+"""Share of the certificate horizon after which a loop whose relative state stayed outside the certified set of
+the row in force moves the planner back into it (a reset at the same ``beta``, or a hold)."""
+
+
+def certificate_horizon(info: models_pb2.ModelInfo) -> float | None:
+    """The horizon over which the model's rows were verified, seconds: the shortest of them (None: no row
+    verified). From a relative state in a row's certified set the error stays within its bound for this long
+    while the planner obeys its ``beta``."""
+    horizons = [row.verification.horizon for row in info.teb_table if row.HasField("verification")]
+    return min(horizons) if horizons else None
 
 
 def row_for(rows: Sequence[SpeedRow], beta: float) -> int | None:
@@ -452,6 +470,10 @@ class StepReport:
     """``r_next`` lies inside the model's trained domain (False: treat the control as unsupported)."""
     round_trips: int
     """Ticks and calls sent in this step (1 on the common branch)."""
+    certificate_age: float
+    """Seconds since the relative state last lay in the certified set of the row in force, with that row in
+    force since (0 when it lies there now): the certificate from that state covers the step while this is
+    below the verification horizon."""
 
 
 class OnlineLoop:
@@ -518,6 +540,9 @@ class OnlineLoop:
         self._q = q
         self._rng = np.random.default_rng(seed)
         self._beta_query = self._speeds[-1].beta
+        self._certificate_horizon = certificate_horizon(info)
+        # The robot starts at rest on the planner.
+        self._certificate_age = 0.0
         self._replan_flag = True
         self._planner_state: Point = self._start
         self._raw_path: deque[Point] = deque()
@@ -626,15 +651,21 @@ class OnlineLoop:
             self._replan_flag = False
         round_trips = 0
         branch: Branch
-        if speed.beta < beta_old:
-            index, p_star = self._closest_path_state(position)
-            round_trips += 1
-            reply = self._tick(tracker, p_star, d_obs, speed.beta)
-            if reply.in_teb:
+        horizon = self._certificate_horizon
+        stale = horizon is not None and self._certificate_age >= REANCHOR_SHARE * horizon
+        if speed.beta < beta_old or (speed.beta == beta_old and stale):
+            reply, index, p_star = None, 0, self._planner_state
+            if speed.beta < beta_old:
+                index, p_star = self._closest_path_state(position)
+                round_trips += 1
+                reply = self._tick(tracker, p_star, d_obs, speed.beta)
+            if reply is not None and reply.in_teb:
                 for _ in range(index):
                     self._raw_path.popleft()
                 branch, p_next = "keep", p_star
             else:
+                # Outside the smaller row's set, or outside the set of the row in force for half the
+                # certificate horizon: reset into it, or hold.
                 candidate, calls = self._reset_point(tracker, position, speed)
                 round_trips += calls
                 if candidate is None:
@@ -651,6 +682,8 @@ class OnlineLoop:
             p_next = advance_along(self._planner_state, ahead, speed.beta * self.control_period)
             round_trips += 1
             reply = self._tick(tracker, p_next, d_obs, speed.beta)
+            if speed.beta > beta_old and not reply.in_teb:
+                return self._steady(tracker, d_obs, beta_old, speed, replanned, round_trips)
             self._raw_path = ahead
             branch = "advance"
         self._beta_query = speed.beta
@@ -670,6 +703,56 @@ class OnlineLoop:
             in_teb=reply.in_teb,
             in_domain=reply.in_domain,
             round_trips=round_trips,
+            certificate_age=self._age(reply.in_teb),
+        )
+
+    def _age(self, in_teb: bool) -> float:
+        """The certificate's age after a step whose relative state lies in the set of the row now in force
+        (``in_teb``) or not: every branch that changes the row puts it in the new row's set."""
+        self._certificate_age = 0.0 if in_teb else self._certificate_age + self.control_period
+        return self._certificate_age
+
+    def _steady(
+        self,
+        tracker: list[float],
+        d_obs: float | None,
+        beta_old: float,
+        speed: PlannerSpeed,
+        replanned: bool,
+        round_trips: int,
+    ) -> StepReport:
+        """A refused rise: the faster row's certified set does not hold the new relative state, so the planner
+        moves along the raw path at ``beta_old`` and ``u*`` is read under its row, whose certificate still
+        runs."""
+        index = row_for(self._speeds, beta_old)
+        if index is None:
+            raise TableMismatch(local=beta_old, server=self._speeds[-1].beta)
+        row = self._speeds[index]
+        ahead = deque(self._raw_path)
+        p_next = advance_along(self._planner_state, ahead, row.beta * self.control_period)
+        r = self._relative_state(tracker, p_next)
+        params = np.full((1, self._n_params), row.beta)
+        answer = self.client.tracking_control(self.model, [r], params, out_of_domain="flag", version=self.version)
+        self._raw_path = ahead
+        self._beta_query = row.beta
+        self._planner_state = p_next
+        in_teb = bool(answer.in_teb[0])
+        return StepReport(
+            d_obs=d_obs,
+            beta_old=beta_old,
+            beta_query=row.beta,
+            dteb_radius=row.bound,
+            steb_radius=speed.steb_radius,
+            replanned=replanned,
+            branch="steady",
+            planner=np.array(p_next, dtype=np.float64),
+            control=answer.controls[0],
+            relative_state=np.array(r, dtype=np.float64),
+            value=float(answer.values[0]),
+            in_teb=in_teb,
+            in_domain=bool(answer.in_domain[0]),
+            round_trips=round_trips + 1,
+            certificate_age=self._age(in_teb),
         )
 
     def _plan(self, inflation: float) -> list[Point]:
@@ -742,6 +825,7 @@ class OnlineLoop:
         params = np.full((1, self._n_params), row.beta)
         answer = self.client.tracking_control(self.model, [r], params, out_of_domain="flag", version=self.version)
         self._beta_query = row.beta
+        in_teb = bool(answer.in_teb[0])
         return StepReport(
             d_obs=d_obs,
             beta_old=beta_old,
@@ -754,9 +838,10 @@ class OnlineLoop:
             control=answer.controls[0],
             relative_state=np.array(r, dtype=np.float64),
             value=float(answer.values[0]),
-            in_teb=bool(answer.in_teb[0]),
+            in_teb=in_teb,
             in_domain=bool(answer.in_domain[0]),
             round_trips=round_trips + 1,
+            certificate_age=self._age(in_teb),
         )
 
     def _relative_state(self, tracker: list[float], p: Point) -> list[float]:
