@@ -222,6 +222,8 @@ pub struct LoopCore {
 enum Stage {
     /// Waiting for the tick at `p_next`, the path consumed up to it; `rising` when `beta_query > beta_old`.
     Advance { p_next: Point, ahead: VecDeque<Point>, rising: bool },
+    /// Waiting for the batch of candidates that move the planner back into the set of `row`, in force.
+    Reanchor { free: Vec<Point>, row: SpeedRow },
     /// Waiting for the answer at `p_next` moved at `beta_old`, under `row` (a refused rise).
     Steady { p_next: Point, ahead: VecDeque<Point>, row: SpeedRow },
     /// Waiting for the tick at `p*`, the raw-path state `index` states along.
@@ -382,11 +384,22 @@ impl LoopCore {
             query: Query::Batch { states: Vec::new(), beta: speed.beta },
         };
         let stale = self.view.certificate_horizon.is_some_and(|t| self.certificate_age >= REANCHOR_SHARE * t);
-        if speed.beta == beta_old && stale {
-            // The relative state has stayed outside the row's certified set for half the horizon: move the
-            // planner back into it (a reset at the same beta), or hold if no free point is in it.
-            step.round_trips = 0;
-            return self.ask_candidates(step);
+        if speed.beta >= beta_old && stale {
+            // The relative state has stayed outside the certified set of the row in force for half the
+            // horizon: move the planner back into that row's set (a reset under the same row, answered by the
+            // batch that found it), or hold if no free point is in it. A rise waits for the next step.
+            let row = self.row_in_force(beta_old)?;
+            let free = self.reset_candidates(position, row.bound, speed.steb_radius);
+            if free.is_empty() {
+                step.round_trips = 0;
+                return self.hold(step);
+            }
+            step.query = Query::Batch {
+                states: free.iter().flat_map(|&p| self.relative_state(tracker, p)).collect(),
+                beta: row.beta,
+            };
+            step.stage = Stage::Reanchor { free, row };
+            return Ok(step);
         }
         let p = if speed.beta < beta_old {
             let (index, p_star) = self.closest_path_state(position);
@@ -407,7 +420,7 @@ impl LoopCore {
     /// Asks about the free reset candidates around the tracker under the step's `beta_query`, or holds if
     /// none is free.
     fn ask_candidates(&mut self, mut step: Step) -> Result<Step, CoreError> {
-        let free = self.reset_candidates(step.position, &step.speed);
+        let free = self.reset_candidates(step.position, step.speed.dteb_radius, step.speed.steb_radius);
         if free.is_empty() {
             return self.hold(step);
         }
@@ -429,33 +442,34 @@ impl LoopCore {
     }
 
     /// Free reset candidates: the tracker's own position first, then points drawn uniformly in the disc of
-    /// radius `dTEBmax` around it, those farther than the sTEB from every sensed obstacle.
-    fn reset_candidates(&mut self, position: Point, speed: &PlannerSpeed) -> Vec<Point> {
+    /// radius `radius` (the row's bound) around it, those farther than the sTEB from every sensed obstacle.
+    fn reset_candidates(&mut self, position: Point, radius: f64, steb_radius: f64) -> Vec<Point> {
         let mut free = Vec::with_capacity(self.settings.reset_candidates);
         for k in 0..self.settings.reset_candidates {
             let candidate = if k == 0 {
                 position
             } else {
-                let (radius, angle) = (
-                    speed.dteb_radius * self.rng.random::<f64>().sqrt(),
-                    std::f64::consts::TAU * self.rng.random::<f64>(),
-                );
-                [position[0] + radius * angle.cos(), position[1] + radius * angle.sin()]
+                let (distance, angle) =
+                    (radius * self.rng.random::<f64>().sqrt(), std::f64::consts::TAU * self.rng.random::<f64>());
+                [position[0] + distance * angle.cos(), position[1] + distance * angle.sin()]
             };
-            if clearance(&self.obstacles, candidate) > speed.steb_radius {
+            if clearance(&self.obstacles, candidate) > steb_radius {
                 free.push(candidate);
             }
         }
         free
     }
 
+    /// The row answering for `beta_old` in the current table (only a table replaced under the loop can end
+    /// below it).
+    fn row_in_force(&self, beta_old: f64) -> Result<SpeedRow, CoreError> {
+        let beta_u = self.view.speeds.last().map_or(f64::NAN, |row| row.beta);
+        row_for(&self.view.speeds, beta_old).map(|i| self.view.speeds[i]).ok_or(CoreError::NoRow { beta_old, beta_u })
+    }
+
     /// The hold's question: the held planner state's relative state under the row answering for `beta_old`.
     fn hold(&self, mut step: Step) -> Result<Step, CoreError> {
-        // Only a table replaced under the loop can end below `beta_old`.
-        let beta_u = self.view.speeds.last().map_or(f64::NAN, |row| row.beta);
-        let row = row_for(&self.view.speeds, step.beta_old)
-            .map(|i| self.view.speeds[i])
-            .ok_or(CoreError::NoRow { beta_old: step.beta_old, beta_u })?;
+        let row = self.row_in_force(step.beta_old)?;
         step.query = Query::Batch { states: self.relative_state(&step.tracker, self.planner), beta: row.beta };
         step.stage = Stage::Hold { row };
         step.round_trips += 1;
@@ -560,6 +574,15 @@ impl Step {
                 self.stage = Stage::Reset { candidate };
                 self.round_trips += 1;
                 Ok(Progress::Ask(self))
+            }
+            Stage::Reanchor { free, row } => {
+                let chosen = free.into_iter().zip(answers).find(|(_, a)| a.in_set && a.in_domain);
+                let Some((candidate, answer)) = chosen else {
+                    return core.hold(self).map(Progress::Ask);
+                };
+                core.raw_path.clear();
+                core.replan_flag = true;
+                Ok(core.done(self, Branch::Reset, candidate, answer, Some(row)))
             }
             Stage::Reset { candidate } => {
                 let answer = single()?;
@@ -724,7 +747,8 @@ mod tests {
         assert!(ages.iter().zip(1..).all(|(a, k)| (a - 0.1 * f64::from(k)).abs() < 1e-9), "{ages:?}");
         let (report, asked) = run(&mut core, &[0.0; 4], &[], true, true);
         assert_eq!((report.branch, report.beta_query, report.certificate_age), (Branch::Reset, 1.5, 0.0));
-        assert!(matches!(asked[..], [Query::Batch { beta: 1.5, .. }, Query::Tick { beta: 1.5, .. }]), "{asked:?}");
+        assert!(matches!(asked[..], [Query::Batch { beta: 1.5, .. }]), "the batch that found it answers: {asked:?}");
+        assert_eq!(report.round_trips, 1);
         // With no candidate in the set, the planner holds instead (and the age goes on).
         for _ in 0..5 {
             run(&mut core, &[0.0; 4], &[], false, true);
@@ -733,6 +757,22 @@ mod tests {
         let (report, _) = run(&mut core, &[0.0; 4], &[], false, false);
         assert_eq!((report.branch, report.planner), (Branch::Hold, planner));
         assert!((report.certificate_age - 0.6).abs() < 1e-9, "{}", report.certificate_age);
+    }
+
+    #[test]
+    fn refused_rises_outside_the_set_for_half_the_horizon_move_back_into_the_slower_set() {
+        let mut core = core();
+        run(&mut core, &[0.0; 4], &[], true, true);
+        run(&mut core, &[0.1, 0.0, 0.0, 0.0], &[OBSTACLE], true, true);
+        let far = [-20.0, 0.0, 0.0, 0.0];
+        for _ in 0..5 {
+            let (report, _) = run(&mut core, &far, &[], false, false);
+            assert_eq!((report.branch, report.beta_query), (Branch::Steady, 0.5));
+        }
+        // The rise is still refused, and the certificate of 0.5's row is 0.5 s old: back into that row's set.
+        let (report, asked) = run(&mut core, &far, &[], false, true);
+        assert_eq!((report.branch, report.beta_query, report.certificate_age), (Branch::Reset, 0.5, 0.0));
+        assert!(matches!(asked[..], [Query::Batch { beta: 0.5, .. }]), "{asked:?}");
     }
 
     #[test]

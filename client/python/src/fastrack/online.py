@@ -20,7 +20,8 @@ Each :meth:`OnlineLoop.step` takes the tracker state and the obstacles sensed no
    along the raw path for one control period, each axis at most ``beta_query dt`` (branch ``"advance"``),
    except on a rise whose new relative state the faster row's certified set does not hold: then it moves at
    ``beta_old``, whose row stays in force (branch ``"steady"``); and when the relative state has stayed outside
-   the certified set of the row in force for half the verification horizon, it is reset into it (or holds);
+   the certified set of the row in force for half the verification horizon, the planner is reset into it
+   under that row, a rise waiting for the next step (or holds);
 5. reads ``u*`` at ``r_next = s - Q p_next`` under ``beta_query`` (``beta_old`` on a hold or a steady step).
 
 The tick that carries ``p_next`` (or the candidate ``p*``) returns ``beta_query``, the bound's membership
@@ -69,7 +70,7 @@ from .geometry import (
     segment_is_free,
     sub,
 )
-from .results import TrackReply
+from .results import TrackingControl, TrackReply
 from .track import TrackStream
 from .v1 import models_pb2
 
@@ -189,7 +190,7 @@ def query_planner_control(rows: Sequence[SpeedRow], d_obs: float | None) -> Plan
 
 REANCHOR_SHARE = 0.5
 """Share of the certificate horizon after which a loop whose relative state stayed outside the certified set of
-the row in force moves the planner back into it (a reset at the same ``beta``, or a hold)."""
+the row in force moves the planner back into it (a reset under that row, or a hold)."""
 
 
 def certificate_horizon(info: models_pb2.ModelInfo) -> float | None:
@@ -653,19 +654,17 @@ class OnlineLoop:
         branch: Branch
         horizon = self._certificate_horizon
         stale = horizon is not None and self._certificate_age >= REANCHOR_SHARE * horizon
-        if speed.beta < beta_old or (speed.beta == beta_old and stale):
-            reply, index, p_star = None, 0, self._planner_state
-            if speed.beta < beta_old:
-                index, p_star = self._closest_path_state(position)
-                round_trips += 1
-                reply = self._tick(tracker, p_star, d_obs, speed.beta)
-            if reply is not None and reply.in_teb:
+        if speed.beta >= beta_old and stale:
+            return self._reanchor(tracker, position, d_obs, beta_old, speed, replanned)
+        if speed.beta < beta_old:
+            index, p_star = self._closest_path_state(position)
+            round_trips += 1
+            reply = self._tick(tracker, p_star, d_obs, speed.beta)
+            if reply.in_teb:
                 for _ in range(index):
                     self._raw_path.popleft()
                 branch, p_next = "keep", p_star
             else:
-                # Outside the smaller row's set, or outside the set of the row in force for half the
-                # certificate horizon: reset into it, or hold.
                 candidate, calls = self._reset_point(tracker, position, speed)
                 round_trips += calls
                 if candidate is None:
@@ -783,28 +782,81 @@ class OnlineLoop:
         return best
 
     def _reset_point(self, tracker: list[float], position: Point, speed: PlannerSpeed) -> tuple[Point | None, int]:
-        """A free planner state with ``s - Q p`` in the certified set and the trained domain, if there is one
-        among the candidates: the tracker's own position first, then points drawn uniformly in the disc of
-        radius ``dTEBmax`` around it, the free ones asked about in one ``TrackingControl`` batch. Also returns
-        the calls made."""
+        """A free planner state with ``s - Q p`` in the certified set of ``beta_query`` and the trained domain,
+        if there is one among the candidates (:meth:`_candidates`). Also returns the calls made."""
+        found, calls = self._candidates(tracker, position, SpeedRow(speed.beta, speed.dteb_radius), speed.steb_radius)
+        return (found[0] if found else None), calls
+
+    def _candidates(
+        self, tracker: list[float], position: Point, row: SpeedRow, steb_radius: float
+    ) -> tuple[tuple[Point, TrackingControl, int] | None, int]:
+        """The first free reset candidate with ``s - Q p`` in the certified set of ``row`` and the trained
+        domain, with the batch's answer and its index there: the tracker's own position first, then points
+        drawn uniformly in the disc of the row's radius around it, the free ones asked about in one
+        ``TrackingControl`` batch. Also returns the calls made."""
         free: list[Point] = []
         for k in range(self.reset_candidates):
             if k == 0:
                 candidate = position
             else:
-                radius = speed.dteb_radius * math.sqrt(self._rng.random())
+                radius = row.bound * math.sqrt(self._rng.random())
                 angle = math.tau * self._rng.random()
                 candidate = (position[0] + radius * math.cos(angle), position[1] + radius * math.sin(angle))
-            if clearance(self._obstacles, candidate) > speed.steb_radius:
+            if clearance(self._obstacles, candidate) > steb_radius:
                 free.append(candidate)
         if not free:
             return None, 0
         states = np.array([self._relative_state(tracker, p) for p in free])
-        params = np.full((len(free), self._n_params), speed.beta)
+        params = np.full((len(free), self._n_params), row.beta)
         answer = self.client.tracking_control(self.model, states, params, out_of_domain="flag", version=self.version)
         # Inside the bound and the trained domain: a membership read off an extrapolated value is no reset.
-        inside = [p for p, teb, domain in zip(free, answer.in_teb, answer.in_domain) if teb and domain]
-        return (inside[0] if inside else None), 1
+        for i, (p, teb, domain) in enumerate(zip(free, answer.in_teb, answer.in_domain)):
+            if teb and domain:
+                return (p, answer, i), 1
+        return None, 1
+
+    def _reanchor(
+        self,
+        tracker: list[float],
+        position: Point,
+        d_obs: float | None,
+        beta_old: float,
+        speed: PlannerSpeed,
+        replanned: bool,
+    ) -> StepReport:
+        """The relative state has stayed outside the certified set of the row in force for half the
+        verification horizon: the planner moves back into that row's set (a reset under the same row,
+        answered by the batch that found it), or holds if no free point is in it. A rise waits for the next
+        step."""
+        index = row_for(self._speeds, beta_old)
+        if index is None:
+            raise TableMismatch(local=beta_old, server=self._speeds[-1].beta)
+        row = self._speeds[index]
+        found, calls = self._candidates(tracker, position, row, speed.steb_radius)
+        if found is None:
+            return self._hold(tracker, d_obs, beta_old, speed, replanned, calls)
+        candidate, answer, i = found
+        self._raw_path.clear()
+        self._replan_flag = True
+        self._beta_query = row.beta
+        self._planner_state = candidate
+        return StepReport(
+            d_obs=d_obs,
+            beta_old=beta_old,
+            beta_query=row.beta,
+            dteb_radius=row.bound,
+            steb_radius=speed.steb_radius,
+            replanned=replanned,
+            branch="reset",
+            planner=np.array(candidate, dtype=np.float64),
+            control=answer.controls[i],
+            relative_state=np.array(self._relative_state(tracker, candidate), dtype=np.float64),
+            value=float(answer.values[i]),
+            in_teb=True,
+            in_domain=True,
+            round_trips=calls,
+            certificate_age=self._age(True),
+        )
 
     def _hold(
         self,
