@@ -41,7 +41,7 @@ pub enum Branch {
 }
 
 impl Branch {
-    /// Its name in records: `advance`, `keep`, `reset` or `hold`.
+    /// Its name in records: `advance`, `steady`, `keep`, `reset` or `hold`.
     pub fn name(self) -> &'static str {
         match self {
             Branch::Advance => "advance",
