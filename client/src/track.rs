@@ -72,7 +72,10 @@ impl TrackStream {
                 Ok(Ok(response)) => {
                     return Ok(Opened { endpoint: replica.endpoint.clone(), ticks: tx, replies: response.into_inner() })
                 }
-                Ok(Err(status)) if replica_lost(&status) => last = Some(status),
+                // A replica that is gone, or that holds all the streams it allows: try the next.
+                Ok(Err(status)) if replica_lost(&status) || status.code() == tonic::Code::ResourceExhausted => {
+                    last = Some(status)
+                }
                 Ok(Err(status)) => return Err(status.into()),
                 Err(_) => {
                     last = Some(tonic::Status::unavailable(format!(

@@ -302,7 +302,12 @@ impl TestServer {
 
     /// Starts the server and waits until health is SERVING.
     pub async fn start_serving(models: &Path) -> (Self, FastrackClient) {
-        let server = Self::start(models, &[]);
+        Self::start_serving_with(models, &[]).await
+    }
+
+    /// [`TestServer::start_serving`] with extra server arguments.
+    pub async fn start_serving_with(models: &Path, extra_args: &[&str]) -> (Self, FastrackClient) {
+        let server = Self::start(models, extra_args);
         let client = server.client().await;
         if client.wait_until_serving(Duration::from_secs(60)).await.is_err() {
             panic!("server never became SERVING; log:\n{}", server.log_text());

@@ -157,3 +157,26 @@ async fn a_replica_that_never_answers_is_passed_over_when_a_stream_opens() {
     assert!(started.elapsed() >= Duration::from_millis(1000), "{:?}", started.elapsed());
     held.abort();
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_replica_at_its_stream_limit_passes_new_streams_to_another() {
+    let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
+    let (full, _) = TestServer::start_serving_with(&models, &["--max-track-streams", "1"]).await;
+    let (roomy, _) = TestServer::start_serving(&models).await;
+    let address = format!("{},{}", full.endpoint, roomy.endpoint);
+    let client = FastrackClient::connect(&address, ClientOptions::default()).await.unwrap();
+    let mut streams = Vec::new();
+    for robot in 0..4 {
+        let mut stream = client.track(model_ref("dubins4d", 0), 0.0).await.unwrap();
+        assert_eq!(stream.tick(robot_tick(0, robot)).await.unwrap().seq, 0, "robot {robot}");
+        streams.push(stream);
+    }
+    let on = |endpoint: &str| streams.iter().filter(|s| s.endpoint() == endpoint).count();
+    assert_eq!((on(&full.endpoint), on(&roomy.endpoint)), (1, 3), "the full replica took one stream");
+    // With every replica full, the open fails with the limit's status.
+    let (alone, _) = TestServer::start_serving_with(&models, &["--max-track-streams", "1"]).await;
+    let client = FastrackClient::connect(&alone.endpoint, ClientOptions::default()).await.unwrap();
+    let _first = client.track(model_ref("dubins4d", 0), 0.0).await.unwrap();
+    let refused = client.track(model_ref("dubins4d", 0), 0.0).await.err().expect("no replica has room");
+    assert_eq!(refused.code(), Some(tonic::Code::ResourceExhausted), "{refused}");
+}

@@ -289,3 +289,25 @@ def test_addresses_are_checked_and_names_resolved(server: Server) -> None:
         assert named.endpoints and all(e.endswith(f":{port}") for e in named.endpoints), named.endpoints
         assert f"127.0.0.1:{port}" in named.endpoints
         assert named.query_planner_control(MODEL, 2.5).beta_query == pytest.approx(0.8)
+
+
+def test_a_replica_at_its_stream_limit_passes_new_streams_to_another(server: Server) -> None:
+    full = Server("--max-track-streams", "1").start().wait_serving()
+    try:
+        with fastrack.Client(f"{full.address},{server.address}") as client:
+            robots = [client.track(MODEL) for _ in range(4)]
+            try:
+                for k, robot in enumerate(robots):
+                    assert robot.tick(*robot_state(0, k)).seq == 0
+                places = [robot.endpoint for robot in robots]
+                assert (places.count(full.address), places.count(server.address)) == (1, 3), places
+            finally:
+                for robot in robots:
+                    robot.close()
+        # With every replica full, the open fails with the limit's own status.
+        with fastrack.Client(full.address) as alone, alone.track(MODEL) as first:
+            assert first.tick(*robot_state(0, 9)).seq == 0
+            with pytest.raises(fastrack.ResourceExhausted, match="max_track_streams"):
+                alone.track(MODEL)
+    finally:
+        full.stop()

@@ -94,14 +94,23 @@ def _movable(error: FastrackError) -> bool:
     return replica_lost(error) or error.code == grpc.StatusCode.OK
 
 
+def _passed_over(error: FastrackError) -> bool:
+    """True when a replica that refused to open a stream may be passed over for the next: it is gone, or it
+    holds all the streams it allows (``RESOURCE_EXHAUSTED``)."""
+    return _movable(error) or error.code == grpc.StatusCode.RESOURCE_EXHAUSTED
+
+
 def _no_replica(why: str, detail: str) -> Unavailable:
     return Unavailable(f"{why}; no replica took the stream again ({detail})")
 
 
 def _refused(why: str, failures: list[tuple[str, FastrackError]], raise_as_is: bool) -> FastrackError:
-    """The error of an open that every replica refused as gone (``failures``): as a unary call's at the
-    first open (``raise_as_is``), else saying ``why`` the stream had to move."""
+    """The error of an open that every replica refused as gone or full (``failures``): as a unary call's at
+    the first open (``raise_as_is``; a full replica's own ``RESOURCE_EXHAUSTED`` when all were full), else
+    saying ``why`` the stream had to move."""
     if raise_as_is:
+        if failures and all(e.code == grpc.StatusCode.RESOURCE_EXHAUSTED for _, e in failures):
+            return failures[-1][1]  # every replica holds all the streams it allows: say so, as it did
         return all_unavailable(failures) if failures else Unavailable("no replica to open a Track stream on")
     detail = "; ".join(f"{where}: {e.code.name}: {e.message}" for where, e in failures)
     return _no_replica(why, detail or "no replica to open it on")
@@ -154,7 +163,7 @@ class TrackStream:
             if not call.is_active():
                 requests.put(None)  # ends the thread feeding the call
                 error = from_status(call.code(), call.details() or "the Track stream ended at once")
-                if not _movable(error):
+                if not _passed_over(error):
                     raise error if raise_as_is else _no_replica(why, f"{endpoint}: {error.code.name}: {error.message}")
                 failures.append((endpoint, error))
                 continue
@@ -328,7 +337,7 @@ class AsyncTrackStream:
                     self.resent += len(resend)
                 return
             call.cancel()
-            if not _movable(error):
+            if not _passed_over(error):
                 raise error if raise_as_is else _no_replica(why, f"{endpoint}: {error.code.name}: {error.message}")
             failures.append((endpoint, error))
         raise _refused(why, failures, raise_as_is)
