@@ -251,6 +251,18 @@ impl TestServer {
         response.split_once("\r\n\r\n").map(|(_, body)| body.to_string()).unwrap_or_default()
     }
 
+    /// The sample's value once it equals `want`, or its last value after 20 s of polling.
+    pub async fn wait_for_metric(&self, sample: &str, want: f64) -> f64 {
+        let start = std::time::Instant::now();
+        loop {
+            let value = self.metric(sample).await;
+            if value == want || start.elapsed() > Duration::from_secs(20) {
+                return value;
+            }
+            tokio::time::sleep(Duration::from_millis(100)).await;
+        }
+    }
+
     /// The value of one sample of a scrape (`name{labels}` exactly as exposed), 0 if absent.
     pub async fn metric(&self, sample: &str) -> f64 {
         let page = self.scrape().await;

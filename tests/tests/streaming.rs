@@ -4,20 +4,8 @@
 use fastrack_client::{model_ref, pb};
 use fastrack_e2e::{binary, write_test_bundle, TestServer};
 use fastrack_valuefn::system::dubins4d;
-use std::time::{Duration, Instant};
 
 use fastrack_e2e::robot_tick as tick;
-
-async fn wait_for_metric(server: &TestServer, sample: &str, want: f64) -> f64 {
-    let start = Instant::now();
-    loop {
-        let value = server.metric(sample).await;
-        if value == want || start.elapsed() > Duration::from_secs(20) {
-            return value;
-        }
-        tokio::time::sleep(Duration::from_millis(100)).await;
-    }
-}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn ten_thousand_ticks_are_answered_in_order() {
@@ -53,7 +41,7 @@ async fn ten_thousand_ticks_are_answered_in_order() {
     let answered = server.metric(r#"fastrack_track_ticks_total{rpc="Track",model="dubins-test",code="OK"}"#).await;
     assert_eq!(answered, TICKS as f64);
     drop(stream);
-    assert_eq!(wait_for_metric(&server, "fastrack_active_streams", 0.0).await, 0.0);
+    assert_eq!(server.wait_for_metric("fastrack_active_streams", 0.0).await, 0.0);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -91,7 +79,7 @@ async fn five_hundred_concurrent_streams_get_every_tick() {
     }
     let answered = server.metric(r#"fastrack_track_ticks_total{rpc="Track",model="dubins-test",code="OK"}"#).await;
     assert_eq!(answered, (STREAMS * TICKS) as f64);
-    assert_eq!(wait_for_metric(&server, "fastrack_active_streams", 0.0).await, 0.0);
+    assert_eq!(server.wait_for_metric("fastrack_active_streams", 0.0).await, 0.0);
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
@@ -104,10 +92,10 @@ async fn a_vanished_client_frees_its_stream() {
         .args([server.endpoint.as_str(), "dubins-test", "8"])
         .spawn()
         .unwrap();
-    assert_eq!(wait_for_metric(&server, "fastrack_active_streams", 8.0).await, 8.0, "the robot opened 8 streams");
+    assert_eq!(server.wait_for_metric("fastrack_active_streams", 8.0).await, 8.0, "the robot opened 8 streams");
     child.kill().unwrap();
     child.wait().unwrap();
-    assert_eq!(wait_for_metric(&server, "fastrack_active_streams", 0.0).await, 0.0, "streams freed after the kill");
+    assert_eq!(server.wait_for_metric("fastrack_active_streams", 0.0).await, 0.0, "streams freed after the kill");
     // The server still serves new streams.
     let client = server.client().await;
     let mut stream = client.track(model_ref("dubins-test", 0), 0.0).await.unwrap();
