@@ -1,12 +1,15 @@
 //! The online half of Parametric FaSTrack as a library a robot's own stack can call every control step:
 //! [`core::LoopCore`] makes the decisions of the paper's Alg. 3 without any I/O, and
-//! [`online_loop::OnlineLoop`] answers its questions from the fastrack service over one `Track` stream, with any raw-path planner behind [`raw_path::RawPathPlanner`] (A* on a grid by default) and the
-//! obstacles of [`geometry`].
+//! [`online_loop::OnlineLoop`] has its questions answered by an [`oracle::Oracle`] (the fastrack service over
+//! one `Track` stream: [`track_oracle::TrackOracle`]), with any raw-path planner behind
+//! [`raw_path::RawPathPlanner`] (A* on a grid by default) and the obstacles of [`geometry`].
 
 pub mod core;
 pub mod geometry;
 pub mod online_loop;
+pub mod oracle;
 pub mod raw_path;
+pub mod track_oracle;
 
 /// The guide's example (`docs/online-loop.md`), compiled as a doctest so that it cannot drift from this crate.
 #[cfg(doctest)]

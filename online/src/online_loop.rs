@@ -1,4 +1,4 @@
-//! The paper's online loop (Alg. 3), one control step at a time, over a `Track` stream.
+//! The paper's online loop (Alg. 3), one control step at a time, its questions answered by an [`Oracle`].
 //!
 //! Each [`OnlineLoop::step`] takes the tracker state and the obstacles sensed now, and
 //! 1. measures `d_obs`, the distance from the tracker to the nearest obstacle sensed so far;
@@ -15,24 +15,22 @@
 //!    the planner along the raw path for one control period at per-axis speed at most `beta_query`;
 //! 5. reads `u*` at `r_next = s - Q p_next` under `beta_query` (`beta_old` on a hold).
 //!
-//! The decisions are [`crate::core::LoopCore`]'s; this loop answers its questions over the network. The tick
-//! that carries `p_next` (or the candidate `p*`) returns `beta_query`, the bound's membership and `u*`
-//! together, so the common branch costs one round trip; a reset asks about all its candidates in one
-//! `TrackingControl` batch and then ticks the chosen one; a hold reads its control with one more
-//! `TrackingControl` call under `beta_old`.
-//! The server's `beta_query` is checked against the local one: a table that changed under the loop (the
+//! The decisions are [`crate::core::LoopCore`]'s; an [`Oracle`] answers its questions. Over the network
+//! ([`TrackOracle`], [`OnlineLoop::start`]) the tick that carries `p_next` (or the candidate `p*`) returns
+//! `beta_query`, the bound's membership and `u*` together, so the common branch costs one round trip; a
+//! reset asks about all its candidates in one `TrackingControl` batch and then ticks the chosen one; a hold
+//! reads its control with one more `TrackingControl` call under `beta_old`.
+//! The oracle's `beta_query` is checked against the local one: a table that changed under the loop (the
 //! model was reloaded) is fetched again and the step repeated once.
 
-use crate::core::{Answer, CoreError, CoreSettings, LoopCore, ModelView, Progress, Query};
+use crate::core::{CoreError, CoreSettings, LoopCore, Progress};
 use crate::geometry::{Obstacle, Point};
+use crate::oracle::Oracle;
 use crate::raw_path::{PlanError, RawPathPlanner};
-use fastrack_client::{pb, ClientError, FastrackClient, TrackStream};
-use fastrack_proto::planner_speed::SpeedRow;
+use crate::track_oracle::TrackOracle;
+use fastrack_client::{pb, ClientError, FastrackClient};
 
 pub use crate::core::{Branch, StepReport};
-
-/// Out-of-domain states are answered with a flag, as on the `Track` stream.
-const FLAG: pb::OutOfDomainPolicy = pb::OutOfDomainPolicy::Flag;
 
 /// How the loop runs.
 #[derive(Debug, Clone, PartialEq)]
@@ -67,6 +65,14 @@ pub enum LoopError {
         /// The server's message.
         message: String,
     },
+    /// A model answered in the same process refused a question.
+    #[error("the model refused a question: {message} (gRPC code {code})")]
+    Refused {
+        /// The status code the service would have answered with.
+        code: i32,
+        /// Why.
+        message: String,
+    },
     /// The raw path could not be planned.
     #[error(transparent)]
     Plan(#[from] PlanError),
@@ -97,49 +103,42 @@ impl From<CoreError> for LoopError {
     }
 }
 
-/// The horizon over which the model's rows were verified: the shortest of them (`None`: no row verified).
-pub fn certificate_horizon(info: &pb::ModelInfo) -> Option<f64> {
-    info.teb_table.iter().filter_map(|row| row.verification.as_ref().map(|v| v.horizon)).reduce(f64::min)
+impl LoopSettings {
+    /// The core's share of the settings.
+    pub fn core(&self) -> CoreSettings {
+        CoreSettings {
+            control_period: self.control_period,
+            goal: self.goal,
+            bounds: self.bounds,
+            reset_candidates: self.reset_candidates,
+            seed: self.seed,
+        }
+    }
 }
 
-/// The online loop of one robot: [`LoopCore`]'s decisions, answered by the server over one `Track` stream.
-pub struct OnlineLoop {
-    client: FastrackClient,
-    stream: TrackStream,
-    model: pb::ModelRef,
+/// The online loop of one robot: [`LoopCore`]'s decisions, answered by an [`Oracle`] (by default the
+/// server, over one `Track` stream).
+pub struct OnlineLoop<O = TrackOracle> {
+    oracle: O,
     core: LoopCore,
-    n_params: usize,
-    seq: u64,
 }
 
-impl OnlineLoop {
+impl OnlineLoop<TrackOracle> {
     /// Opens a `Track` stream for the model and places the planner at `start` (its initial state `p_0`).
     pub async fn start(client: &FastrackClient, settings: LoopSettings, start: Point) -> Result<Self, LoopError> {
-        let core_settings = CoreSettings {
-            control_period: settings.control_period,
-            goal: settings.goal,
-            bounds: settings.bounds,
-            reset_candidates: settings.reset_candidates,
-            seed: settings.seed,
-        };
         // Settings are checked before the server is asked anything.
-        core_settings.check()?;
-        let info = client.get_model(settings.model.clone()).await?;
-        if info.planner_dim != 2 {
-            return Err(LoopError::Setup(format!(
-                "model {} has a {}-D planner; the online loop plans in the plane (2-D planners)",
-                info.name, info.planner_dim
-            )));
-        }
-        let view = ModelView {
-            speeds: info.teb_table.iter().map(SpeedRow::from).collect(),
-            planner_to_state: info.planner_to_state.clone(),
-            n_state: info.state.len(),
-            certificate_horizon: certificate_horizon(&info),
-        };
-        let core = LoopCore::new(view, core_settings, start)?;
-        let stream = client.track(settings.model.clone(), 0.0).await?;
-        Ok(Self { client: client.clone(), stream, model: settings.model, core, n_params: info.params.len(), seq: 0 })
+        let core = settings.core();
+        core.check()?;
+        let oracle = TrackOracle::open(client, settings.model).await?;
+        Self::new(oracle, core, start)
+    }
+}
+
+impl<O: Oracle> OnlineLoop<O> {
+    /// A loop whose questions `oracle` answers, with the planner at `start` (its initial state `p_0`).
+    pub fn new(oracle: O, settings: CoreSettings, start: Point) -> Result<Self, LoopError> {
+        let core = LoopCore::new(oracle.view().clone(), settings, start)?;
+        Ok(Self { oracle, core })
     }
 
     /// The planner's current state `p`.
@@ -172,8 +171,8 @@ impl OnlineLoop {
     ) -> Result<StepReport, LoopError> {
         match self.decide(tracker, sensed, planner).await {
             Err(LoopError::TableMismatch { .. }) => {
-                let info = self.client.get_model(self.model.clone()).await?;
-                self.core.replace_table(info.teb_table.iter().map(SpeedRow::from).collect())?;
+                let speeds = self.oracle.refresh().await?;
+                self.core.replace_table(speeds)?;
                 self.decide(tracker, &[], planner).await
             }
             other => other,
@@ -188,64 +187,10 @@ impl OnlineLoop {
     ) -> Result<StepReport, LoopError> {
         let mut step = self.core.begin(tracker, sensed, planner)?;
         loop {
-            let answers = self.ask(step.query()).await?;
+            let answers = self.oracle.answer(step.query()).await?;
             match step.answer(&mut self.core, answers)? {
                 Progress::Ask(next) => step = next,
                 Progress::Done(report) => return Ok(report),
-            }
-        }
-    }
-
-    /// Answers one of the core's questions: a tick on the stream (its `beta_query` checked against the
-    /// core's), or one `TrackingControl` batch.
-    async fn ask(&mut self, query: &Query) -> Result<Vec<Answer>, LoopError> {
-        match query {
-            Query::Tick { tracker, planner, d_obs, beta } => {
-                let seq = self.seq;
-                self.seq += 1;
-                let tick = pb::TrackTick {
-                    seq,
-                    tracker_state: tracker.clone(),
-                    planner_state: planner.to_vec(),
-                    d_obs: *d_obs,
-                };
-                let reply = self.stream.tick(tick).await?;
-                if let Some(error) = reply.error {
-                    return Err(LoopError::Tick { seq, code: error.code, message: error.message });
-                }
-                if reply.beta_query != *beta {
-                    return Err(LoopError::TableMismatch { local: *beta, server: reply.beta_query });
-                }
-                Ok(vec![Answer {
-                    relative_state: reply.relative_state,
-                    value: reply.value,
-                    in_set: reply.in_teb,
-                    in_domain: reply.in_domain,
-                    control: reply.control,
-                }])
-            }
-            Query::Batch { states, beta } => {
-                let n_state = self.core.view().n_state;
-                let count = states.len() / n_state;
-                let params = vec![*beta; count * self.n_params];
-                let reply = self.client.tracking_control(self.model.clone(), states.clone(), params, FLAG).await?;
-                let n_control = reply.controls.len() / count.max(1);
-                let fits = reply.values.len() == count && reply.in_teb.len() == count && reply.in_domain.len() == count;
-                if !fits || reply.controls.len() != count * n_control {
-                    return Err(LoopError::Setup(format!(
-                        "TrackingControl answered a batch of {count} with {} values",
-                        reply.values.len()
-                    )));
-                }
-                Ok((0..count)
-                    .map(|i| Answer {
-                        relative_state: states[i * n_state..(i + 1) * n_state].to_vec(),
-                        value: reply.values[i],
-                        in_set: reply.in_teb[i],
-                        in_domain: reply.in_domain[i],
-                        control: reply.controls[i * n_control..(i + 1) * n_control].to_vec(),
-                    })
-                    .collect())
             }
         }
     }

@@ -1,5 +1,6 @@
 //! One loaded model version: its manifest, its evaluator and the answers derived from them.
 
+use crate::validate::ValidBatch;
 use fastrack_proto::planner_speed::{self, SpeedRow};
 use fastrack_proto::v1 as pb;
 use fastrack_valuefn::bundle::Bundle;
@@ -7,6 +8,14 @@ use fastrack_valuefn::manifest::{Manifest, TebRow};
 use fastrack_valuefn::runtime::{Evaluation, Evaluator, GraphDims, Runtime, RuntimeError};
 use fastrack_valuefn::system::StateSpace;
 use tonic::Status;
+
+/// What an evaluation returns for one batch, beside the batch.
+pub struct BatchResult {
+    /// Graph outputs for the batch's items.
+    pub outputs: Evaluation,
+    /// Per item: `V <= set level` of the row for its largest parameter.
+    pub in_teb: Vec<bool>,
+}
 
 /// A model version ready to answer.
 pub struct LoadedModel {
@@ -66,6 +75,19 @@ impl LoadedModel {
     /// its bound holds.
     pub fn in_teb(&self, value: f32, beta: f64) -> bool {
         self.row_for(beta).is_some_and(|row| f64::from(value) <= row.set_level())
+    }
+
+    /// The result of `batch` from its graph outputs: each item's membership in the certified set of its row.
+    pub fn result(&self, outputs: Evaluation, batch: &ValidBatch) -> BatchResult {
+        let in_teb = outputs.value.iter().zip(&batch.max_beta).map(|(&v, &b)| self.in_teb(v, b)).collect();
+        BatchResult { outputs, in_teb }
+    }
+
+    /// Evaluates a validated batch on the calling thread (blocks): what the compute pool answers, for a
+    /// caller that holds the model in its own process.
+    pub fn answer(&self, batch: &ValidBatch) -> Result<BatchResult, Status> {
+        let outputs = self.compute(&batch.states, &batch.params)?;
+        Ok(self.result(outputs, batch))
     }
 
     /// Evaluates `[N x n_state]` states with `[N x n_params]` params; blocks (compute-pool threads only).

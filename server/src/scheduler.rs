@@ -4,7 +4,7 @@
 //! splits the answer. A full queue refuses new work with `RESOURCE_EXHAUSTED`; work whose caller left or
 //! whose deadline passed is dropped unevaluated.
 
-use crate::loaded_model::LoadedModel;
+use crate::loaded_model::{BatchResult, LoadedModel};
 use crate::metrics::Metrics;
 use crate::settings::ComputeSettings;
 use crate::validate::ValidBatch;
@@ -14,14 +14,6 @@ use std::sync::{Arc, Condvar, Mutex, MutexGuard};
 use std::time::Instant;
 use tokio::sync::oneshot;
 use tonic::Status;
-
-/// What an evaluation returns for one request, beside its batch.
-pub struct BatchResult {
-    /// Graph outputs for this request's items.
-    pub outputs: Evaluation,
-    /// Per item: `V <= TEB level` of its largest parameter.
-    pub in_teb: Vec<bool>,
-}
 
 type Reply = Result<(BatchResult, ValidBatch), Status>;
 
@@ -208,8 +200,8 @@ impl Shared {
         };
         let split = if group.len() == 1 { vec![outputs] } else { split(outputs, &group, &model) };
         for (job, outputs) in group.drain(..).zip(split) {
-            let in_teb = outputs.value.iter().zip(&job.batch.max_beta).map(|(&v, &b)| model.in_teb(v, b)).collect();
-            let _ = job.reply.send(Ok((BatchResult { outputs, in_teb }, job.batch)));
+            let result = model.result(outputs, &job.batch);
+            let _ = job.reply.send(Ok((result, job.batch)));
         }
     }
 }

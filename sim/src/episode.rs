@@ -8,6 +8,7 @@
 //! a thread of its own, so that runs at once never starve the runtime's workers, and with them the
 //! connection every run's calls travel on.
 
+use crate::backend::Backend;
 use crate::methods::{Context, Controller, Method, MethodError};
 use crate::tracker::{Disturbance, RangeSensor, Tracker};
 use crate::visits::Visit;
@@ -157,9 +158,9 @@ pub struct Run {
     pub visits: Vec<Visit>,
 }
 
-/// What every run against one model shares, fetched from the server once.
+/// What every run against one model shares, fetched from the server (or the model in this process) once.
 pub struct Simulator {
-    client: FastrackClient,
+    backend: Backend,
     settings: RunSettings,
     tracker: Arc<Tracker>,
     speeds: Vec<SpeedRow>,
@@ -170,9 +171,16 @@ pub struct Simulator {
 }
 
 impl Simulator {
-    /// Fetches the model of `settings` and checks that runs can be simulated with it.
+    /// Fetches the model of `settings` from the server and checks that runs can be simulated with it.
     pub async fn connect(client: &FastrackClient, settings: RunSettings) -> Result<Self, MethodError> {
-        let info = client.get_model(settings.model.clone()).await?;
+        let backend = Backend::Service { client: client.clone(), model: settings.model.clone() };
+        Self::new(backend, settings).await
+    }
+
+    /// Reads the model's description from `backend` and checks that runs can be simulated with it (the
+    /// model of `settings` names the server's model; a model in this process is the backend's own).
+    pub async fn new(backend: Backend, settings: RunSettings) -> Result<Self, MethodError> {
+        let info = backend.model_info().await?;
         let system = fastrack_valuefn::system::for_bundle(&info.system, info.params.len())
             .ok_or_else(|| MethodError::Setup(format!("the simulator has no dynamics for system `{}`", info.system)))?;
         let tracker = Arc::new(Tracker::new(system).map_err(MethodError::Setup)?);
@@ -195,14 +203,14 @@ impl Simulator {
             return Err(MethodError::Setup(format!("sensor range {} m; must be finite and > 0", sensor.range)));
         }
         Ok(Self {
-            client: client.clone(),
+            backend,
             settings,
             tracker,
             speeds,
             n_params: info.params.len(),
             control_period,
             sensor,
-            certificate_horizon: fastrack_online::online_loop::certificate_horizon(&info),
+            certificate_horizon: fastrack_online::track_oracle::certificate_horizon(&info),
         })
     }
 
@@ -248,8 +256,7 @@ impl Simulator {
     pub async fn run(&self, world: &World, method: &Method, seed: u64) -> Result<Run, MethodError> {
         let (tracker, settings, control_period) = (&self.tracker, &self.settings, self.control_period);
         let context = Context {
-            client: self.client.clone(),
-            model: settings.model.clone(),
+            backend: self.backend.clone(),
             speeds: self.speeds.clone(),
             n_params: self.n_params,
             tracker: Arc::clone(tracker),

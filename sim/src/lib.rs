@@ -1,11 +1,15 @@
 //! A 2-D navigation simulator around the fastrack service, for the online half of Parametric FaSTrack:
 //! [`world`]s from files or seeds, the tracker's true dynamics and a range sensor ([`tracker`]), the
 //! methods compared ([`methods`]: Parametric FaSTrack over the `Track` stream, FaSTrack at fixed speeds,
-//! Meta-FaSTrack, MPPI), one run of a method through a world ([`episode`]), the benchmark's summaries
-//! ([`bench`]), the relative states the online loop visited ([`visits`]) and the figures ([`plot`]).
+//! Meta-FaSTrack, MPPI), where they get their answers ([`backend`]: the service, or the model in this
+//! process), one run of a method through a world ([`episode`]), the benchmark's summaries ([`bench`]), the
+//! relative states the online loop visited ([`visits`]) and the figures ([`plot`]).
 
+pub mod backend;
 pub mod bench;
 pub mod episode;
+#[cfg(feature = "in-process")]
+pub mod in_process;
 pub mod methods;
 pub mod plot;
 pub mod tracker;

@@ -2,9 +2,10 @@
 //! `Track` stream (see [`super::track`]).
 
 use super::observe;
+use crate::loaded_model::BatchResult;
 use crate::metrics::Metrics;
 use crate::repository::Repository;
-use crate::scheduler::{BatchResult, Scheduler};
+use crate::scheduler::Scheduler;
 use crate::validate::{self, ValidBatch, MAX_BOUNDARY_POINTS};
 use fastrack_proto::planner_speed::query_planner_control;
 use fastrack_proto::v1 as pb;

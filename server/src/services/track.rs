@@ -5,12 +5,12 @@
 //! the send timeout for a client that stopped reading, after which the stream is closed, and a stream with no
 //! tick for its idle timeout is closed with `DEADLINE_EXCEEDED`.
 
-use crate::loaded_model::LoadedModel;
+use crate::loaded_model::{BatchResult, LoadedModel};
 use crate::metrics::{code_name, Metrics};
 use crate::repository::Repository;
 use crate::scheduler::Scheduler;
-use crate::validate;
-use fastrack_proto::planner_speed::query_planner_control;
+use crate::validate::{self, ValidBatch};
+use fastrack_proto::planner_speed::{query_planner_control, PlannerSpeed};
 use fastrack_proto::v1 as pb;
 use pb::track_request::Msg;
 use std::sync::Arc;
@@ -215,24 +215,47 @@ async fn evaluate_tick(
     tick: pb::TrackTick,
     beta_old: f64,
 ) -> Result<pb::TrackReply, Status> {
-    validate::tick(model, &tick.tracker_state, &tick.planner_state)?;
-    let d_obs = validate::d_obs(tick.d_obs)?;
-    let speed = query_planner_control(&model.speeds, d_obs);
-    let relative = model.space.relative_state(&tick.tracker_state, &tick.planner_state);
-    let params = vec![speed.beta; model.manifest.n_params()];
-    let batch = validate::batch(model, &relative, &params, pb::OutOfDomainPolicy::Flag)?;
+    let (question, batch) = TickQuestion::new(model, &tick)?;
     let (result, batch) = scheduler.evaluate(model, batch, None).await?;
-    Ok(pb::TrackReply {
-        seq: tick.seq,
-        beta_query: speed.beta,
-        beta_old,
-        dteb_radius: speed.dteb_radius,
-        steb_radius: speed.steb_radius,
-        relative_state: relative,
-        value: f64::from(result.outputs.value[0]),
-        in_teb: result.in_teb[0],
-        in_domain: batch.in_domain[0],
-        control: result.outputs.control.iter().map(|&x| f64::from(x)).collect(),
-        error: None,
-    })
+    Ok(question.reply(beta_old, result, &batch))
+}
+
+/// A validated tick: the planner speed queryPlannerControl gives for its `d_obs` and its relative state.
+pub struct TickQuestion {
+    seq: u64,
+    /// queryPlannerControl's answer for the tick's `d_obs`.
+    pub speed: PlannerSpeed,
+    relative: Vec<f64>,
+}
+
+impl TickQuestion {
+    /// Checks the tick's vectors and `d_obs` and forms its relative state, with the batch of one to evaluate
+    /// (`r = s - Q p` under `beta_query`, `in_domain` flagged) on the compute pool or, in the caller's
+    /// process, with [`LoadedModel::answer`].
+    pub fn new(model: &LoadedModel, tick: &pb::TrackTick) -> Result<(Self, ValidBatch), Status> {
+        validate::tick(model, &tick.tracker_state, &tick.planner_state)?;
+        let d_obs = validate::d_obs(tick.d_obs)?;
+        let speed = query_planner_control(&model.speeds, d_obs);
+        let relative = model.space.relative_state(&tick.tracker_state, &tick.planner_state);
+        let params = vec![speed.beta; model.manifest.n_params()];
+        let batch = validate::batch(model, &relative, &params, pb::OutOfDomainPolicy::Flag)?;
+        Ok((Self { seq: tick.seq, speed, relative }, batch))
+    }
+
+    /// The reply, from the evaluation of its batch and the stream's `beta_old`.
+    pub fn reply(self, beta_old: f64, result: BatchResult, batch: &ValidBatch) -> pb::TrackReply {
+        pb::TrackReply {
+            seq: self.seq,
+            beta_query: self.speed.beta,
+            beta_old,
+            dteb_radius: self.speed.dteb_radius,
+            steb_radius: self.speed.steb_radius,
+            relative_state: self.relative,
+            value: f64::from(result.outputs.value[0]),
+            in_teb: result.in_teb[0],
+            in_domain: batch.in_domain[0],
+            control: result.outputs.control.iter().map(|&x| f64::from(x)).collect(),
+            error: None,
+        }
+    }
 }

@@ -2,11 +2,11 @@
 //! several (Meta-FaSTrack, after Fridovich-Keil et al., ICRA 2018): at every replan the fastest level whose
 //! inflated map admits a path is chosen; a faster level is taken at once (its bound contains the slower
 //! one's), a slower one only once the relative state lies inside that level's bound, the planner holding
-//! still until then. The control comes from `TrackingControl` at the level's `beta`; checking a pending
-//! switch and reading the control share one call.
+//! still until then. The control comes from the backend (`TrackingControl`) at the level's `beta`; checking
+//! a pending switch and reading the control share one call.
 
 use super::{Context, Decision, MethodError};
-use fastrack_client::pb;
+use fastrack_online::core::Answer;
 use fastrack_online::geometry::{remember, Obstacle, Point};
 use fastrack_online::raw_path::{advance_along, GridAStar, PlanError, PlanRequest, RawPathPlanner};
 use fastrack_proto::planner_speed::SpeedRow;
@@ -63,18 +63,11 @@ impl LevelPlanner {
         Ok(self.path_planner.plan(&request)?.into_iter().skip(1).collect())
     }
 
-    /// `TrackingControl` for relative states `states[i]` at the speed of level `levels[i]`.
-    async fn controls(&self, states: &[&[f64]], levels: &[usize]) -> Result<pb::TrackingControlResponse, MethodError> {
-        let flat = states.iter().flat_map(|r| r.iter().copied()).collect();
-        let params = levels
-            .iter()
-            .flat_map(|&level| std::iter::repeat_n(self.levels[level].beta, self.context.n_params))
-            .collect();
-        Ok(self
-            .context
-            .client
-            .tracking_control(self.context.model.clone(), flat, params, pb::OutOfDomainPolicy::Flag)
-            .await?)
+    /// Value, membership and control at relative state `r` under level `level`'s `beta`.
+    async fn answer(&self, r: &[f64], level: usize) -> Result<Answer, MethodError> {
+        let (beta, n_params) = (self.levels[level].beta, self.context.n_params);
+        let mut answers = self.context.backend.batch(r, beta, r.len(), n_params).await?;
+        answers.pop().ok_or_else(|| MethodError::Setup("the model answered no state".into()))
     }
 
     /// One control period.
@@ -107,20 +100,20 @@ impl LevelPlanner {
             // smaller set and the switch never happens.
             Some((level, path)) => {
                 let r = self.context.tracker.relative_state(tracker, self.planner);
-                let answer = self.controls(&[&r], &[level]).await?;
-                if answer.in_teb[0] {
+                let answer = self.answer(&r, level).await?;
+                if answer.in_set {
                     (self.current, self.path) = (level, path);
                 } else {
                     self.pending = Some((level, path));
                 }
-                (self.planner, answer.controls, answer.in_domain[0])
+                (self.planner, answer.control, answer.in_domain)
             }
             None => {
                 let budget = self.levels[self.current].beta * self.context.control_period;
                 let p_next = advance_along(self.planner, &mut self.path, budget);
                 let r = self.context.tracker.relative_state(tracker, p_next);
-                let answer = self.controls(&[&r], &[self.current]).await?;
-                (p_next, answer.controls, answer.in_domain[0])
+                let answer = self.answer(&r, self.current).await?;
+                (p_next, answer.control, answer.in_domain)
             }
         };
         self.planner = p_next;

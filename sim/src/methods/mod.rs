@@ -10,10 +10,10 @@ pub use levels::LevelPlanner;
 pub use mppi::{Mppi, MppiSettings};
 pub use parametric::Parametric;
 
+use crate::backend::Backend;
 use crate::tracker::Tracker;
 use crate::visits::Visit;
 use crate::world::World;
-use fastrack_client::{pb, FastrackClient};
 use fastrack_online::geometry::{Obstacle, Point};
 use fastrack_proto::planner_speed::SpeedRow;
 use std::sync::Arc;
@@ -121,10 +121,8 @@ pub enum MethodError {
 /// What every method knows of the model and the run.
 #[derive(Clone)]
 pub struct Context {
-    /// A connection to the server.
-    pub client: FastrackClient,
-    /// The model.
-    pub model: pb::ModelRef,
+    /// Where the answers about the model come from.
+    pub backend: Backend,
     /// Its TEB table as the planner-speed rules read it.
     pub speeds: Vec<SpeedRow>,
     /// How many parameters an item carries (every one set to `beta`).

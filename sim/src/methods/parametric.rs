@@ -1,30 +1,33 @@
-//! Parametric FaSTrack: the online loop of `fastrack-online` over the server's `Track` stream, with A* on a
-//! grid as its raw-path planner.
+//! Parametric FaSTrack: the online loop of `fastrack-online`, answered over the server's `Track` stream (or
+//! by the model in this process), with A* on a grid as its raw-path planner.
 
 use super::{Context, Decision, MethodError};
+use crate::backend::BackendOracle;
 use crate::visits::Visit;
+use fastrack_online::core::CoreSettings;
 use fastrack_online::geometry::{Obstacle, Point};
-use fastrack_online::online_loop::{Branch, LoopSettings, OnlineLoop};
+use fastrack_online::online_loop::{Branch, OnlineLoop};
 use fastrack_online::raw_path::GridAStar;
 
 /// Parametric FaSTrack, running.
 pub struct Parametric {
-    online: OnlineLoop,
+    online: OnlineLoop<BackendOracle>,
     planner: GridAStar,
 }
 
 impl Parametric {
-    /// Opens the loop's stream with the planner at `start`.
+    /// Opens the loop's oracle (over the service: its `Track` stream) with the planner at `start`.
     pub async fn start(context: Context, start: Point) -> Result<Self, MethodError> {
-        let settings = LoopSettings {
-            model: context.model.clone(),
+        let settings = CoreSettings {
             control_period: context.control_period,
             goal: context.world.goal,
             bounds: context.world.bounds(),
             reset_candidates: 256,
             seed: context.seed,
         };
-        Ok(Self { online: OnlineLoop::start(&context.client, settings, start).await?, planner: GridAStar::default() })
+        settings.check().map_err(|e| MethodError::Setup(e.to_string()))?;
+        let oracle = context.backend.oracle().await?;
+        Ok(Self { online: OnlineLoop::new(oracle, settings, start)?, planner: GridAStar::default() })
     }
 
     /// One step of Alg. 3.

@@ -1,0 +1,132 @@
+//! The oracle of a robot on the network: one `Track` stream answers the tick of each step (`beta_query`,
+//! membership, `u*` in one round trip), `TrackingControl` answers the batches (reset candidates, a held
+//! state), and `GetModel` gives the table.
+
+use crate::core::{Answer, ModelView, Query};
+use crate::online_loop::LoopError;
+use crate::oracle::Oracle;
+use fastrack_client::{pb, FastrackClient, TrackStream};
+use fastrack_proto::planner_speed::SpeedRow;
+
+/// Out-of-domain states are answered with a flag, as on the `Track` stream.
+const FLAG: pb::OutOfDomainPolicy = pb::OutOfDomainPolicy::Flag;
+
+/// The horizon over which the model's rows were verified: the shortest of them (`None`: no row verified).
+pub fn certificate_horizon(info: &pb::ModelInfo) -> Option<f64> {
+    info.teb_table.iter().filter_map(|row| row.verification.as_ref().map(|v| v.horizon)).reduce(f64::min)
+}
+
+/// The model as the core reads it, from its description; the online loop plans in the plane, so the
+/// model's planner must be 2-D.
+pub fn model_view(info: &pb::ModelInfo) -> Result<ModelView, LoopError> {
+    if info.planner_dim != 2 {
+        return Err(LoopError::Setup(format!(
+            "model {} has a {}-D planner; the online loop plans in the plane (2-D planners)",
+            info.name, info.planner_dim
+        )));
+    }
+    Ok(ModelView {
+        speeds: info.teb_table.iter().map(SpeedRow::from).collect(),
+        planner_to_state: info.planner_to_state.clone(),
+        n_state: info.state.len(),
+        certificate_horizon: certificate_horizon(info),
+    })
+}
+
+/// One `TrackingControl` call for the relative states `states` (row-major, `n_state` each) under `beta`
+/// (every parameter of every item set to it), as the core's [`Answer`]s.
+pub async fn batch_answers(
+    client: &FastrackClient,
+    model: pb::ModelRef,
+    states: &[f64],
+    beta: f64,
+    n_state: usize,
+    n_params: usize,
+) -> Result<Vec<Answer>, LoopError> {
+    let count = states.len() / n_state;
+    let params = vec![beta; count * n_params];
+    let reply = client.tracking_control(model, states.to_vec(), params, FLAG).await?;
+    let n_control = reply.controls.len() / count.max(1);
+    let fits = reply.values.len() == count && reply.in_teb.len() == count && reply.in_domain.len() == count;
+    if !fits || reply.controls.len() != count * n_control {
+        return Err(LoopError::Setup(format!(
+            "TrackingControl answered a batch of {count} with {} values",
+            reply.values.len()
+        )));
+    }
+    Ok((0..count)
+        .map(|i| Answer {
+            relative_state: states[i * n_state..(i + 1) * n_state].to_vec(),
+            value: reply.values[i],
+            in_set: reply.in_teb[i],
+            in_domain: reply.in_domain[i],
+            control: reply.controls[i * n_control..(i + 1) * n_control].to_vec(),
+        })
+        .collect())
+}
+
+/// The fastrack service as the oracle, over one `Track` stream.
+pub struct TrackOracle {
+    client: FastrackClient,
+    stream: TrackStream,
+    model: pb::ModelRef,
+    view: ModelView,
+    n_params: usize,
+    seq: u64,
+}
+
+impl TrackOracle {
+    /// Fetches the model's description and opens a `Track` stream for it.
+    pub async fn open(client: &FastrackClient, model: pb::ModelRef) -> Result<Self, LoopError> {
+        let info = client.get_model(model.clone()).await?;
+        let view = model_view(&info)?;
+        let stream = client.track(model.clone(), 0.0).await?;
+        Ok(Self { client: client.clone(), stream, model, view, n_params: info.params.len(), seq: 0 })
+    }
+}
+
+impl Oracle for TrackOracle {
+    fn view(&self) -> &ModelView {
+        &self.view
+    }
+
+    /// A tick on the stream (its `beta_query` checked against the core's), or one `TrackingControl` batch.
+    async fn answer(&mut self, query: &Query) -> Result<Vec<Answer>, LoopError> {
+        match query {
+            Query::Tick { tracker, planner, d_obs, beta } => {
+                let seq = self.seq;
+                self.seq += 1;
+                let tick = pb::TrackTick {
+                    seq,
+                    tracker_state: tracker.clone(),
+                    planner_state: planner.to_vec(),
+                    d_obs: *d_obs,
+                };
+                let reply = self.stream.tick(tick).await?;
+                if let Some(error) = reply.error {
+                    return Err(LoopError::Tick { seq, code: error.code, message: error.message });
+                }
+                if reply.beta_query != *beta {
+                    return Err(LoopError::TableMismatch { local: *beta, server: reply.beta_query });
+                }
+                Ok(vec![Answer {
+                    relative_state: reply.relative_state,
+                    value: reply.value,
+                    in_set: reply.in_teb,
+                    in_domain: reply.in_domain,
+                    control: reply.control,
+                }])
+            }
+            Query::Batch { states, beta } => {
+                let model = self.model.clone();
+                batch_answers(&self.client, model, states, *beta, self.view.n_state, self.n_params).await
+            }
+        }
+    }
+
+    async fn refresh(&mut self) -> Result<Vec<SpeedRow>, LoopError> {
+        let info = self.client.get_model(self.model.clone()).await?;
+        self.view = model_view(&info)?;
+        Ok(self.view.speeds.clone())
+    }
+}
