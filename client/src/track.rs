@@ -4,9 +4,8 @@
 //! ends with `UNAVAILABLE`, as a draining replica's streams do; its connection breaks, as a killed replica's
 //! does; or it closes with ticks unanswered), it reopens on the client's next replica and sends those ticks
 //! again, so every tick is answered exactly once as seen by the robot. A stream that every replica in turn
-//! takes and loses without answering gives up. Nothing else needs carrying over: the server keeps no state a robot cannot resend,
-//! except `beta_old`, which starts again at `beta_u` on the new replica (the reply's `beta_old` says so; a
-//! robot's own loop keeps its own).
+//! takes and loses without answering gives up. Nothing else needs carrying over: a reply depends on its tick
+//! alone, and the bound in force (`beta_old`) is the robot's own loop's.
 
 use crate::replicas::replica_lost;
 use crate::{pb, ClientError, FastrackClient};

@@ -97,7 +97,7 @@ impl Oracle for LocalOracle {
                     return Err(LoopError::TableMismatch { local: *beta, server: question.speed.beta });
                 }
                 let result = model.answer(&batch).map_err(refused)?;
-                let reply = question.reply(*beta, result, &batch);
+                let reply = question.reply(result, &batch);
                 Ok(vec![Answer {
                     relative_state: reply.relative_state,
                     value: reply.value,

@@ -107,12 +107,19 @@ async fn a_drop_in_beta_with_no_planner_state_inside_the_smaller_bound_holds_und
     let fast = [0.0, 0.0, ALONG_X, 2.5];
     let first = online.step(&fast, &[], &mut planner).await.unwrap();
     let obstacle = Obstacle::Circle { center: [3.6, 0.0], radius: 0.5 };
-    let step = online.step(&fast, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
-    assert_eq!(step.branch, Branch::Hold, "{step:?}");
-    assert_eq!(
-        (step.beta_old, step.beta_query, step.dteb_radius),
-        (first.beta_query, first.beta_query, first.dteb_radius)
-    );
+    let mut step = online.step(&fast, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
+    // Held step after step, the bound in force stays the old row's: the loop owns `beta_old`.
+    for held in 0..3 {
+        assert_eq!(step.branch, Branch::Hold, "held step {held}: {step:?}");
+        assert_eq!(
+            (step.beta_old, step.beta_query, step.dteb_radius),
+            (first.beta_query, first.beta_query, first.dteb_radius),
+            "held step {held}"
+        );
+        if held < 2 {
+            step = online.step(&fast, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
+        }
+    }
     assert!(step.dteb_radius > step.d_obs.unwrap() / 2.0, "the old bound stays in force: {step:?}");
     assert_eq!(step.planner, first.planner, "the planner waits where it is");
     assert_eq!(step.round_trips, 3, "p*, one batch of reset candidates, the held control");
@@ -129,7 +136,10 @@ async fn a_drop_in_beta_with_no_planner_state_inside_the_smaller_bound_holds_und
     let slow = [step.planner[0], step.planner[1], ALONG_X, 1.0];
     let next = online.step(&slow, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
     assert!(next.beta_query < next.beta_old && next.branch == Branch::Keep, "{next:?}");
+    assert_eq!(next.beta_old, first.beta_query, "the drop is taken from the held row");
     assert!(next.in_teb && next.dteb_radius <= next.d_obs.unwrap() / 2.0, "{next:?}");
+    let after = online.step(&slow, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
+    assert_eq!(after.beta_old, next.beta_query, "then the dropped row is in force");
 }
 
 /// Keep and reset take the planner only where the server's membership says the relative state is

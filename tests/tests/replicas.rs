@@ -1,8 +1,12 @@
 //! A client of several replicas: calls go round-robin, and when a replica dies mid-run every robot's `Track`
-//! stream moves to another one and goes on, each tick answered exactly once, in order.
+//! stream moves to another one and goes on, each tick answered exactly once, in order, and an online loop
+//! keeps its bound in force across the move.
 
 use fastrack_client::{model_ref, pb, ClientOptions, FastrackClient};
 use fastrack_e2e::{robot_tick, TestServer};
+use fastrack_online::geometry::Obstacle;
+use fastrack_online::online_loop::{LoopSettings, OnlineLoop};
+use fastrack_online::raw_path::GridAStar;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -179,4 +183,52 @@ async fn a_replica_at_its_stream_limit_passes_new_streams_to_another() {
     let _first = client.track(model_ref("dubins4d", 0), 0.0).await.unwrap();
     let refused = client.track(model_ref("dubins4d", 0), 0.0).await.err().expect("no replica has room");
     assert_eq!(refused.code(), Some(tonic::Code::ResourceExhausted), "{refused}");
+}
+
+/// The bound in force is the robot's: an online loop whose `Track` stream moves to another replica goes on
+/// under the row it had (the stream itself keeps nothing), and the step after the move starts from it.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn an_online_loop_keeps_its_bound_in_force_across_a_failover() {
+    let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
+    let mut servers = Vec::new();
+    for _ in 0..2 {
+        servers.push(TestServer::start_observed(&models, &[]).await.0);
+    }
+    let address = servers.iter().map(|s| s.endpoint.as_str()).collect::<Vec<_>>().join(",");
+    let options = ClientOptions { request_timeout: Duration::from_secs(10), ..ClientOptions::default() };
+    let client = FastrackClient::connect(&address, options).await.unwrap();
+    let settings = LoopSettings {
+        model: model_ref("dubins4d", 0),
+        control_period: 0.1,
+        goal: [10.0, 0.0],
+        bounds: ([-2.0, -6.0], [12.0, 6.0]),
+        reset_candidates: 64,
+        seed: 5,
+    };
+    let mut online = OnlineLoop::start(&client, settings, [0.0, 0.0]).await.unwrap();
+    let mut planner = GridAStar::default();
+    let tracker = [0.0, 0.0, std::f64::consts::FRAC_PI_2, 1.0];
+    let obstacle = Obstacle::Circle { center: [3.6, 0.0], radius: 0.5 };
+    let first = online.step(&tracker, &[], &mut planner).await.unwrap();
+    let dropped = online.step(&tracker, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
+    assert!(dropped.beta_query < first.beta_query, "the obstacle lowers the row in force: {dropped:?}");
+    // Kill the replica that holds the loop's stream.
+    let mut on_stream = None;
+    for (i, server) in servers.iter().enumerate() {
+        if server.metric("fastrack_active_streams").await == 1.0 {
+            on_stream = Some(i);
+        }
+    }
+    let victim = on_stream.expect("one replica holds the loop's stream");
+    servers[victim].kill();
+    let mut previous = dropped;
+    for step in 0..3 {
+        let position = [previous.planner[0], previous.planner[1], tracker[2], tracker[3]];
+        let report = online.step(&position, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
+        assert_eq!(report.beta_old, previous.beta_query, "step {step} after the failover: {report:?}");
+        assert!(report.beta_query < first.beta_query, "step {step}: {report:?}");
+        previous = report;
+    }
+    let survivor = &servers[1 - victim];
+    assert_eq!(survivor.metric("fastrack_active_streams").await, 1.0, "the stream moved to the other replica");
 }

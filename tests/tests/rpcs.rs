@@ -146,7 +146,7 @@ async fn every_rpc_answers_like_the_in_process_evaluator() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn track_stream_answers_every_tick_in_order_and_keeps_beta_old() {
+async fn track_stream_answers_every_tick_in_order_from_the_tick_alone() {
     let repo = tempfile::tempdir().unwrap();
     let dir = write_test_bundle(repo.path(), &dubins4d::system(), "dubins-test", 1, 4);
     let (reference, manifest) = evaluator_for(&dir);
@@ -154,7 +154,7 @@ async fn track_stream_answers_every_tick_in_order_and_keeps_beta_old() {
     let mut stream = client.track(model_ref("dubins-test", 0), 5.0).await.unwrap();
 
     let ticks = [(None, 1.25), (Some(1.0), 0.65), (Some(0.0), 0.5), (Some(10.0), 1.25)];
-    let mut expected_beta_old = 1.25;
+    let mut replies = Vec::new();
     for (seq, (d_obs, expected_beta)) in ticks.iter().enumerate() {
         let tracker = vec![0.3 + 0.1 * seq as f64, -0.2, 7.0, 1.1];
         let planner = vec![0.1, 0.4];
@@ -170,8 +170,6 @@ async fn track_stream_answers_every_tick_in_order_and_keeps_beta_old() {
         assert!(reply.error.is_none(), "{:?}", reply.error);
         assert_eq!(reply.seq, seq as u64);
         assert!((reply.beta_query - expected_beta).abs() < 1e-9, "tick {seq}: {reply:?}");
-        assert_eq!(reply.beta_old, expected_beta_old);
-        expected_beta_old = reply.beta_query;
         // r = s - Q p with theta wrapped into [-pi, pi).
         let r = [tracker[0] - 0.1, -0.6, 7.0 - 2.0 * std::f64::consts::PI, 1.1];
         for (a, b) in reply.relative_state.iter().zip(r) {
@@ -183,9 +181,21 @@ async fn track_stream_answers_every_tick_in_order_and_keeps_beta_old() {
         let row = manifest.teb_table.iter().find(|row| row.beta >= reply.beta_query - 1e-12).unwrap();
         assert_eq!(reply.in_teb, reply.value <= row.set_level());
         assert!(reply.in_domain);
+        replies.push(reply);
+    }
+    // The stream keeps no state: the ticks sent again, in another order, get the same answers.
+    for (seq, (d_obs, _)) in ticks.iter().enumerate().rev() {
+        let tick = pb::TrackTick {
+            seq: 10 + seq as u64,
+            tracker_state: vec![0.3 + 0.1 * seq as f64, -0.2, 7.0, 1.1],
+            planner_state: vec![0.1, 0.4],
+            d_obs: *d_obs,
+        };
+        let again = stream.tick(tick).await.unwrap();
+        assert_eq!(pb::TrackReply { seq: seq as u64, ..again }, replies[seq], "tick {seq} answered again");
     }
 
-    // A bad tick gets an error reply; the stream stays open and beta_old is untouched.
+    // A bad tick gets an error reply and the stream stays open.
     let bad = stream
         .tick(pb::TrackTick { seq: 99, tracker_state: vec![0.0; 3], planner_state: vec![0.0; 2], d_obs: None })
         .await
@@ -222,7 +232,7 @@ async fn track_stream_answers_every_tick_in_order_and_keeps_beta_old() {
         })
         .await
         .unwrap();
-    assert_eq!((good.seq, good.beta_old), (102, 1.25));
+    assert_eq!((good.seq, good.beta_query, good.error), (102, 1.25, None));
 
     // Many ticks pipelined: every one answered, in order.
     for seq in 0..200u64 {

@@ -3,6 +3,7 @@
 
 use fastrack_client::{model_ref, pb};
 use fastrack_e2e::{binary, write_test_bundle, TestServer};
+use fastrack_proto::planner_speed::{query_planner_control, SpeedRow};
 use fastrack_valuefn::system::dubins4d;
 
 use fastrack_e2e::robot_tick as tick;
@@ -20,9 +21,10 @@ async fn ten_thousand_ticks_are_answered_in_order() {
             tx.send(tick(seq, 0)).await.unwrap();
         }
     });
-    // Keep up to 32 ticks in flight: the server must still answer strictly in order.
+    let speeds: Vec<SpeedRow> =
+        client.get_model(model_ref("dubins-test", 0)).await.unwrap().teb_table.iter().map(SpeedRow::from).collect();
+    // Keep up to 32 ticks in flight: the server must still answer strictly in order, each from its own tick.
     let mut sent = 0u64;
-    let mut previous_beta = None;
     for expected in 0..TICKS {
         while sent < TICKS && sent < expected + 32 {
             stream.send(rx.recv().await.unwrap()).await.unwrap();
@@ -32,10 +34,8 @@ async fn ten_thousand_ticks_are_answered_in_order() {
         assert_eq!(reply.seq, expected, "replies out of order");
         assert!(reply.error.is_none(), "tick {expected}: {:?}", reply.error);
         assert!(reply.value.is_finite() && reply.control.iter().all(|u| u.is_finite()));
-        if let Some(beta) = previous_beta {
-            assert_eq!(reply.beta_old, beta, "beta_old must be the previous tick's beta_query");
-        }
-        previous_beta = Some(reply.beta_query);
+        let chosen = query_planner_control(&speeds, tick(expected, 0).d_obs);
+        assert_eq!(reply.beta_query, chosen.beta, "tick {expected}: beta_query must be its own d_obs' row");
     }
     sender.await.unwrap();
     let answered = server.metric(r#"fastrack_track_ticks_total{rpc="Track",model="dubins-test",code="OK"}"#).await;

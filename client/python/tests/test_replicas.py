@@ -36,8 +36,8 @@ class Robot:
     resent: int = 0
     recovery: float | None = None
     """Seconds from the kill to this robot's first reply after its stream moved."""
-    beta_old_after_move: float | None = None
-    """``beta_old`` of that reply: the new replica starts it again at ``beta_u``."""
+    beta_after_move: tuple[int, float] | None = None
+    """That reply's tick and ``beta_query``: the new replica answers the tick alone, as the old one would."""
 
 
 @dataclass
@@ -66,7 +66,7 @@ class Kill:
         return time.monotonic() - self.at
 
 
-def check(seen: list[Robot], victim: Server, addresses: list[str], beta_u: float) -> float:
+def check(seen: list[Robot], victim: Server, addresses: list[str], beta_for: dict[int, float]) -> float:
     """Every tick answered once, in order; the robots of the killed replica moved once, the others never;
     the streams were spread over the replicas. Returns the slowest recovery, seconds."""
     per_replica = Counter(robot.first_endpoint for robot in seen)
@@ -80,7 +80,10 @@ def check(seen: list[Robot], victim: Server, addresses: list[str], beta_u: float
         assert (robot.recovery is not None) == on_victim, f"robot {i}"
         assert robot.resent <= 1, f"robot {i}: one tick in flight at a time, {robot.resent} resent"
         if on_victim:
-            assert robot.beta_old_after_move == beta_u, f"robot {i}: beta_old restarts at beta_u on the new replica"
+            assert robot.beta_after_move is not None, f"robot {i}"
+            seq, beta = robot.beta_after_move
+            d_obs = robot_state(seq, i)[2]  # 1.0 + seq % 7
+            assert beta == beta_for[round(d_obs)], f"robot {i}: tick {seq} answered from the tick alone"
     slowest = max(robot.recovery for robot in seen if robot.recovery is not None)
     resent = sum(robot.resent for robot in seen)
     print(
@@ -97,7 +100,7 @@ def test_sync_robots_on_a_killed_replica_move_and_every_tick_is_answered_once(re
     kill = Kill(replicas[1], robots)
     with fastrack.Client(",".join(addresses), timeout=10.0) as client:
         assert client.endpoints == addresses
-        beta_u = client.query_planner_control(MODEL).beta_query
+        beta_for = {d: client.query_planner_control(MODEL, d).beta_query for d in range(1, 8)}
         client.dims(MODEL)
         seen = [Robot() for _ in range(robots)]
         failures: list[BaseException] = []
@@ -113,7 +116,7 @@ def test_sync_robots_on_a_killed_replica_move_and_every_tick_is_answered_once(re
                         before = stream.reopened
                         reply = stream.tick(*robot_state(seq, index))
                         if stream.reopened > before:
-                            me.recovery, me.beta_old_after_move = kill.since(), reply.beta_old
+                            me.recovery, me.beta_after_move = kill.since(), (seq, reply.beta_query)
                         me.seqs.append(reply.seq)
                         time.sleep(PAUSE_S)
                     me.reopened, me.resent = stream.reopened, stream.resent
@@ -129,7 +132,7 @@ def test_sync_robots_on_a_killed_replica_move_and_every_tick_is_answered_once(re
         for thread in threads:
             thread.join(timeout=120)
         assert not failures, failures
-        check(seen, replicas[1], addresses, beta_u)
+        check(seen, replicas[1], addresses, beta_for)
 
         # Unary calls skip the dead replica: every one succeeds, even without retries (the replica hops are
         # not retries).
@@ -144,7 +147,7 @@ async def test_async_robots_on_a_killed_replica_move_and_every_tick_is_answered_
     robots = 50
     kill = Kill(replicas[2], robots)
     async with fastrack.AsyncClient(",".join(addresses), timeout=10.0) as client:
-        beta_u = (await client.query_planner_control(MODEL)).beta_query
+        beta_for = {d: (await client.query_planner_control(MODEL, d)).beta_query for d in range(1, 8)}
         await client.dims(MODEL)
 
         async def robot(index: int) -> Robot:
@@ -157,7 +160,7 @@ async def test_async_robots_on_a_killed_replica_move_and_every_tick_is_answered_
                     before = stream.reopened
                     reply = await stream.tick(*robot_state(seq, index))
                     if stream.reopened > before:
-                        me.recovery, me.beta_old_after_move = kill.since(), reply.beta_old
+                        me.recovery, me.beta_after_move = kill.since(), (seq, reply.beta_query)
                     me.seqs.append(reply.seq)
                     await asyncio.sleep(PAUSE_S)
                 me.reopened, me.resent = stream.reopened, stream.resent
@@ -174,7 +177,7 @@ async def test_async_robots_on_a_killed_replica_move_and_every_tick_is_answered_
             await kill_task
         finally:
             kill_task.cancel()
-        check(seen, replicas[2], addresses, beta_u)
+        check(seen, replicas[2], addresses, beta_for)
         for _ in range(9):
             assert (await client.query_planner_control(MODEL, 3.0)).beta_query > 0
         assert (await client.evaluate(MODEL, [[0.1, 0.0, 1.5, 1.0]], 0.6)).values.shape == (1,)

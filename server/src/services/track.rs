@@ -1,4 +1,6 @@
-//! The `Track` bidirectional stream: one per robot, answering every tick in order and keeping `beta_old`.
+//! The `Track` bidirectional stream: one per robot, answering every tick in order. A reply depends on its
+//! tick alone: the stream keeps no state between ticks (the bound in force, `beta_old`, is the robot's), so a
+//! stream that moves to another replica is answered exactly as before.
 //!
 //! What a stream may hold is bounded: the server keeps at most `max_track_streams` streams open at once (a
 //! permit taken before `open` is read), a stream's replies wait in a buffer of [`REPLY_BUFFER`] and at most
@@ -137,7 +139,6 @@ async fn tick_loop(
     idle: Duration,
     guard: &mut StreamGuard,
 ) -> Result<(), Status> {
-    let mut beta_old = model.manifest.beta_range().1;
     let draining = || Status::unavailable("the server is shutting down; reconnect to continue");
     loop {
         if *context.draining.borrow() {
@@ -160,7 +161,7 @@ async fn tick_loop(
                 return Err(Status::cancelled("the client ended the stream"));
             }
             Ok(Some(Ok(pb::TrackRequest { msg: Some(Msg::Tick(tick)) }))) => {
-                answer(&context.scheduler, &model, tick, &mut beta_old).await
+                answer(&context.scheduler, &model, tick).await
             }
             Ok(Some(Ok(_))) => pb::TrackReply {
                 error: Some(pb::TickError {
@@ -188,36 +189,24 @@ async fn tick_loop(
     }
 }
 
-/// Answers one tick; a rejected tick gets an error reply and leaves `beta_old` unchanged.
-async fn answer(
-    scheduler: &Scheduler,
-    model: &Arc<LoadedModel>,
-    tick: pb::TrackTick,
-    beta_old: &mut f64,
-) -> pb::TrackReply {
+/// Answers one tick; a rejected tick gets an error reply.
+async fn answer(scheduler: &Scheduler, model: &Arc<LoadedModel>, tick: pb::TrackTick) -> pb::TrackReply {
     let seq = tick.seq;
-    match evaluate_tick(scheduler, model, tick, *beta_old).await {
-        Ok(reply) => {
-            *beta_old = reply.beta_query;
-            reply
-        }
-        Err(status) => pb::TrackReply {
-            seq,
-            error: Some(pb::TickError { code: status.code() as i32, message: status.message().into() }),
-            ..Default::default()
-        },
-    }
+    evaluate_tick(scheduler, model, tick).await.unwrap_or_else(|status| pb::TrackReply {
+        seq,
+        error: Some(pb::TickError { code: status.code() as i32, message: status.message().into() }),
+        ..Default::default()
+    })
 }
 
 async fn evaluate_tick(
     scheduler: &Scheduler,
     model: &Arc<LoadedModel>,
     tick: pb::TrackTick,
-    beta_old: f64,
 ) -> Result<pb::TrackReply, Status> {
     let (question, batch) = TickQuestion::new(model, &tick)?;
     let (result, batch) = scheduler.evaluate(model, batch, None).await?;
-    Ok(question.reply(beta_old, result, &batch))
+    Ok(question.reply(result, &batch))
 }
 
 /// A validated tick: the planner speed queryPlannerControl gives for its `d_obs` and its relative state.
@@ -242,12 +231,11 @@ impl TickQuestion {
         Ok((Self { seq: tick.seq, speed, relative }, batch))
     }
 
-    /// The reply, from the evaluation of its batch and the stream's `beta_old`.
-    pub fn reply(self, beta_old: f64, result: BatchResult, batch: &ValidBatch) -> pb::TrackReply {
+    /// The reply, from the evaluation of its batch.
+    pub fn reply(self, result: BatchResult, batch: &ValidBatch) -> pb::TrackReply {
         pb::TrackReply {
             seq: self.seq,
             beta_query: self.speed.beta,
-            beta_old,
             dteb_radius: self.speed.dteb_radius,
             steb_radius: self.speed.steb_radius,
             relative_state: self.relative,

@@ -172,7 +172,6 @@ def track_reply(reply: safety_pb2.TrackReply) -> results.TrackReply:
     return results.TrackReply(
         seq=reply.seq,
         beta_query=reply.beta_query,
-        beta_old=reply.beta_old,
         dteb_radius=reply.dteb_radius,
         steb_radius=reply.steb_radius,
         relative_state=_floats(reply.relative_state, (len(reply.relative_state),)),

@@ -93,8 +93,6 @@ class TrackReply:
     """The tick's sequence number."""
     beta_query: float
     """Planner speed bound for this step (m/s)."""
-    beta_old: float
-    """``beta_query`` of the previous successful tick on this stream (beta_u before the first), m/s."""
     dteb_radius: float
     """TEB radius at ``beta_query``, metres: the tracking error stays within it."""
     steb_radius: float

@@ -16,9 +16,8 @@ A replica lost while no tick was waiting is noticed at the next ``send``, which 
 ticks were sent again. When no replica takes the stream, :class:`~fastrack.Unavailable` says what ended it;
 the ticks still waiting are dropped, and the next ``send`` tries the replicas again.
 
-Nothing else needs carrying over: the server keeps no per-stream state a robot cannot resend, except
-``beta_old`` (the previous tick's speed bound), which starts again at ``beta_u`` (the model's largest
-speed bound) on the new replica; the first reply there shows it in its ``beta_old``.
+Nothing else needs carrying over: a reply depends on its tick alone, and the bound in force (``beta_old``)
+is the robot's own online loop's.
 
 A stream is used by one thread (or task) at a time: ``send`` and ``recv`` may both move it.
 """
