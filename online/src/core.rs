@@ -14,8 +14,6 @@
 use crate::geometry::{clearance, norm, remember, sub, Obstacle, Point};
 use crate::raw_path::{advance_along, PlanError, PlanRequest, RawPathPlanner};
 use fastrack_proto::planner_speed::{query_planner_control, row_for, PlannerSpeed, SpeedRow};
-use rand::rngs::StdRng;
-use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
@@ -83,8 +81,6 @@ pub struct CoreSettings {
     pub bounds: (Point, Point),
     /// Reset candidates asked about per reset before the planner holds.
     pub reset_candidates: usize,
-    /// Seed of the reset candidates.
-    pub seed: u64,
 }
 
 impl CoreSettings {
@@ -204,6 +200,24 @@ pub enum CoreError {
     },
 }
 
+/// `count` reset candidates in the disc of radius `radius` around `position`: the position itself first,
+/// then a sunflower spiral, point `k` at distance `radius sqrt((k - 1/2) / (count - 1))` and angle `k` times
+/// the golden angle `pi (3 - sqrt 5)`, which covers the disc evenly at every count. Deterministic, so that
+/// every implementation of the loop asks about the same points (the Python client's included).
+pub fn reset_candidates(position: Point, radius: f64, count: usize) -> Vec<Point> {
+    let golden_angle = std::f64::consts::PI * (3.0 - 5f64.sqrt());
+    let rest = count.saturating_sub(1) as f64;
+    (0..count)
+        .map(|k| {
+            if k == 0 {
+                return position;
+            }
+            let (distance, angle) = (radius * ((k as f64 - 0.5) / rest).sqrt(), k as f64 * golden_angle);
+            [position[0] + distance * angle.cos(), position[1] + distance * angle.sin()]
+        })
+        .collect()
+}
+
 /// The I/O-free state of one robot's loop.
 pub struct LoopCore {
     view: ModelView,
@@ -214,7 +228,6 @@ pub struct LoopCore {
     planner: Point,
     raw_path: VecDeque<Point>,
     obstacles: Vec<Obstacle>,
-    rng: StdRng,
 }
 
 /// Where a step stands between questions.
@@ -281,7 +294,6 @@ impl LoopCore {
             planner: start,
             raw_path: VecDeque::new(),
             obstacles: Vec::new(),
-            rng: StdRng::seed_from_u64(settings.seed),
             view,
             settings,
         })
@@ -389,7 +401,7 @@ impl LoopCore {
             // horizon: move the planner back into that row's set (a reset under the same row, answered by the
             // batch that found it), or hold if no free point is in it. A rise waits for the next step.
             let row = self.row_in_force(beta_old)?;
-            let free = self.reset_candidates(position, row.bound, speed.steb_radius);
+            let free = self.free_candidates(position, row.bound, speed.steb_radius);
             if free.is_empty() {
                 step.round_trips = 0;
                 return self.hold(step);
@@ -420,7 +432,7 @@ impl LoopCore {
     /// Asks about the free reset candidates around the tracker under the step's `beta_query`, or holds if
     /// none is free.
     fn ask_candidates(&mut self, mut step: Step) -> Result<Step, CoreError> {
-        let free = self.reset_candidates(step.position, step.speed.dteb_radius, step.speed.steb_radius);
+        let free = self.free_candidates(step.position, step.speed.dteb_radius, step.speed.steb_radius);
         if free.is_empty() {
             return self.hold(step);
         }
@@ -441,23 +453,13 @@ impl LoopCore {
             .unwrap_or((0, self.planner))
     }
 
-    /// Free reset candidates: the tracker's own position first, then points drawn uniformly in the disc of
-    /// radius `radius` (the row's bound) around it, those farther than the sTEB from every sensed obstacle.
-    fn reset_candidates(&mut self, position: Point, radius: f64, steb_radius: f64) -> Vec<Point> {
-        let mut free = Vec::with_capacity(self.settings.reset_candidates);
-        for k in 0..self.settings.reset_candidates {
-            let candidate = if k == 0 {
-                position
-            } else {
-                let (distance, angle) =
-                    (radius * self.rng.random::<f64>().sqrt(), std::f64::consts::TAU * self.rng.random::<f64>());
-                [position[0] + distance * angle.cos(), position[1] + distance * angle.sin()]
-            };
-            if clearance(&self.obstacles, candidate) > steb_radius {
-                free.push(candidate);
-            }
-        }
-        free
+    /// Free reset candidates: [`reset_candidates`] around the tracker's position, those farther than the
+    /// sTEB from every sensed obstacle.
+    fn free_candidates(&self, position: Point, radius: f64, steb_radius: f64) -> Vec<Point> {
+        reset_candidates(position, radius, self.settings.reset_candidates)
+            .into_iter()
+            .filter(|&candidate| clearance(&self.obstacles, candidate) > steb_radius)
+            .collect()
     }
 
     /// The row answering for `beta_old` in the current table (only a table replaced under the loop can end
@@ -627,9 +629,30 @@ mod tests {
             goal: [10.0, 0.0],
             bounds: ([-20.0; 2], [20.0; 2]),
             reset_candidates: 8,
-            seed: 3,
         };
         LoopCore::new(view, settings, [0.0, 0.0]).unwrap()
+    }
+
+    #[test]
+    fn reset_candidates_start_at_the_position_and_cover_the_disc_evenly() {
+        let (centre, radius) = ([1.0, -2.0], 2.0);
+        let points = reset_candidates(centre, radius, 64);
+        assert_eq!((points.len(), points[0]), (64, centre));
+        assert!(points.iter().all(|&p| norm(sub(p, centre)) <= radius + 1e-12));
+        // Every point of a fine lattice in the disc lies near a candidate: no part of the disc is left out.
+        let mut worst: f64 = 0.0;
+        for i in -20..=20 {
+            for j in -20..=20 {
+                let q = [centre[0] + radius * i as f64 / 20.0, centre[1] + radius * j as f64 / 20.0];
+                if norm(sub(q, centre)) <= radius {
+                    let nearest = points.iter().map(|&p| norm(sub(p, q))).fold(f64::INFINITY, f64::min);
+                    worst = worst.max(nearest);
+                }
+            }
+        }
+        assert!(worst < 0.2 * radius, "a lattice point {worst} m from every candidate");
+        assert_eq!(reset_candidates(centre, radius, 1), vec![centre]);
+        assert!(reset_candidates(centre, radius, 0).is_empty());
     }
 
     /// An answer for the relative state of `query`'s first state (or `r`), with membership `in_set`.

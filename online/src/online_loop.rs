@@ -45,8 +45,6 @@ pub struct LoopSettings {
     pub bounds: (Point, Point),
     /// Reset candidates asked about per reset before the planner holds.
     pub reset_candidates: usize,
-    /// Seed of the reset candidates.
-    pub seed: u64,
 }
 
 /// Why a step could not be taken.
@@ -111,7 +109,6 @@ impl LoopSettings {
             goal: self.goal,
             bounds: self.bounds,
             reset_candidates: self.reset_candidates,
-            seed: self.seed,
         }
     }
 }

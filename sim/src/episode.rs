@@ -10,6 +10,7 @@
 
 use crate::backend::Backend;
 use crate::methods::{Context, Controller, Method, MethodError};
+use crate::trace::LoopTrace;
 use crate::tracker::{Disturbance, RangeSensor, Tracker};
 use crate::visits::Visit;
 use crate::world::World;
@@ -38,6 +39,8 @@ pub struct RunSettings {
     pub sensor_range: Option<f64>,
     /// A push on the tracker the model does not know of (none by default).
     pub disturbance: Option<Disturbance>,
+    /// Record the online loop's trace of Parametric FaSTrack's runs (`Run::trace`).
+    pub trace: bool,
 }
 
 impl Default for RunSettings {
@@ -49,6 +52,7 @@ impl Default for RunSettings {
             time_limit: 120.0,
             sensor_range: None,
             disturbance: None,
+            trace: false,
         }
     }
 }
@@ -156,6 +160,9 @@ pub struct Run {
     /// The relative state of every control period of the online loop, with its branch (Parametric FaSTrack).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub visits: Vec<Visit>,
+    /// The online loop's trace (Parametric FaSTrack, when the settings ask for it).
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub trace: Option<LoopTrace>,
 }
 
 /// What every run against one model shares, fetched from the server (or the model in this process) once.
@@ -165,6 +172,8 @@ pub struct Simulator {
     tracker: Arc<Tracker>,
     speeds: Vec<SpeedRow>,
     n_params: usize,
+    model_name: String,
+    model_version: u32,
     control_period: f64,
     sensor: RangeSensor,
     certificate_horizon: Option<f64>,
@@ -208,6 +217,8 @@ impl Simulator {
             tracker,
             speeds,
             n_params: info.params.len(),
+            model_name: info.name.clone(),
+            model_version: info.version,
             control_period,
             sensor,
             certificate_horizon: fastrack_online::track_oracle::certificate_horizon(&info),
@@ -259,6 +270,9 @@ impl Simulator {
             backend: self.backend.clone(),
             speeds: self.speeds.clone(),
             n_params: self.n_params,
+            model_name: self.model_name.clone(),
+            model_version: self.model_version,
+            trace: settings.trace,
             tracker: Arc::clone(tracker),
             world: Arc::new(world.clone()),
             control_period,
@@ -288,6 +302,7 @@ impl Simulator {
             control_period,
             final_path: Vec::new(),
             visits: Vec::new(),
+            trace: None,
         };
         // A method that cannot start on the server (its stream refused, a call timed out) is a failed run,
         // not a failed benchmark; a method that cannot run on this model at all is an error.
@@ -375,6 +390,7 @@ impl Simulator {
             run.time = t + control_period;
         }
         run.final_path = controller.raw_path();
+        run.trace = controller.take_trace();
         Ok(run)
     }
 }

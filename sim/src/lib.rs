@@ -3,7 +3,8 @@
 //! methods compared ([`methods`]: Parametric FaSTrack over the `Track` stream, FaSTrack at fixed speeds,
 //! Meta-FaSTrack, MPPI), where they get their answers ([`backend`]: the service, or the model in this
 //! process), one run of a method through a world ([`episode`]), the benchmark's summaries ([`bench`]), the
-//! relative states the online loop visited ([`visits`]) and the figures ([`plot`]).
+//! relative states the online loop visited ([`visits`]), its golden traces ([`trace`]) and the figures
+//! ([`plot`]).
 
 pub mod backend;
 pub mod bench;
@@ -12,6 +13,7 @@ pub mod episode;
 pub mod in_process;
 pub mod methods;
 pub mod plot;
+pub mod trace;
 pub mod tracker;
 pub mod visits;
 pub mod world;

@@ -1,13 +1,14 @@
 //! The simulator's in-process backend answers as the server does: the same worlds run over the real server
 //! (gRPC, the `Track` stream) and over the shipped bundle loaded in this process give the same runs, decision
 //! for decision, for Parametric FaSTrack and the level-based baselines; bad bundles are refused with the
-//! folder named.
+//! folder named; a run's golden trace of the online loop records every period and reads back.
 
 use fastrack_e2e::TestServer;
 use fastrack_sim::backend::Backend;
 use fastrack_sim::episode::{Outcome, Run, RunSettings, Simulator};
 use fastrack_sim::in_process::LocalModel;
 use fastrack_sim::methods::Method;
+use fastrack_sim::trace::{LoopTrace, FORMAT};
 use fastrack_sim::world::WorldSpec;
 use std::path::{Path, PathBuf};
 
@@ -76,4 +77,38 @@ fn a_missing_or_broken_bundle_is_refused_with_its_folder_named() {
     std::fs::write(broken.join("model.onnx"), b"not an onnx graph").unwrap();
     let Err(error) = LocalModel::load(&broken, None, 1) else { panic!("a corrupt graph loaded") };
     assert!(error.to_string().contains(&broken.display().to_string()), "{error}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_golden_trace_records_every_period_and_reads_back() {
+    let local = LocalModel::load(&shipped_bundle(), None, 1).unwrap();
+    let settings = RunSettings { trace: true, ..RunSettings::default() };
+    let simulator = Simulator::new(Backend::InProcess(local), settings).await.unwrap();
+    let world = WorldSpec { seed: 2, inflation: simulator.steb_radius(), ..WorldSpec::default() }.generate().unwrap();
+    let run = simulator.run(&world, &Method::Parametric, 2).await.unwrap();
+    let trace = run.trace.clone().expect("PF's run carries its trace");
+    assert_eq!((trace.format.as_str(), trace.start, trace.goal), (FORMAT, world.start, world.goal));
+    assert_eq!(trace.steps.len(), run.samples.len(), "one step per control period");
+    let beta_u = simulator.speeds().last().unwrap().beta;
+    assert_eq!(trace.steps[0].beta_old, beta_u);
+    for (k, pair) in trace.steps.windows(2).enumerate() {
+        assert_eq!(pair[1].beta_old, pair[0].beta_query, "period {}: the bound in force chains", k + 1);
+    }
+    for (step, sample) in trace.steps.iter().zip(&run.samples) {
+        assert_eq!((Some(step.planner), Some(step.dteb_radius)), (sample.planner, sample.bound));
+    }
+    // Each obstacle is given once, when first sensed.
+    let sensed: Vec<_> = trace.steps.iter().flat_map(|s| &s.sensed).collect();
+    assert!(!sensed.is_empty() && sensed.iter().all(|o| world.obstacles.contains(o)));
+    assert!(sensed.iter().enumerate().all(|(i, o)| !sensed[..i].contains(o)), "an obstacle given twice");
+    let dir = tempfile::tempdir().unwrap();
+    let path = dir.path().join("trace.json");
+    trace.write(&path).unwrap();
+    assert_eq!(LoopTrace::read(&path).unwrap(), trace);
+    std::fs::write(&path, r#"{"format": "another/1"}"#).unwrap();
+    let error = LoopTrace::read(&path).unwrap_err();
+    assert!(error.contains("trace.json"), "{error}");
+    // The baselines keep no trace.
+    let mf = simulator.run(&world, &Method::MetaFastrack { levels: 3 }, 2).await.unwrap();
+    assert!(mf.trace.is_none());
 }

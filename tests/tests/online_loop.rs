@@ -22,7 +22,6 @@ fn settings() -> LoopSettings {
         goal: [10.0, 0.0],
         bounds: ([-2.0, -6.0], [12.0, 6.0]),
         reset_candidates: 64,
-        seed: 5,
     }
 }
 

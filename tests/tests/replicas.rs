@@ -203,7 +203,6 @@ async fn an_online_loop_keeps_its_bound_in_force_across_a_failover() {
         goal: [10.0, 0.0],
         bounds: ([-2.0, -6.0], [12.0, 6.0]),
         reset_candidates: 64,
-        seed: 5,
     };
     let mut online = OnlineLoop::start(&client, settings, [0.0, 0.0]).await.unwrap();
     let mut planner = GridAStar::default();

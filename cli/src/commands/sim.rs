@@ -71,7 +71,7 @@ struct Simulation {
 }
 
 impl Simulation {
-    fn settings(&self) -> RunSettings {
+    fn settings(&self, trace: bool) -> RunSettings {
         RunSettings {
             model: model_ref(&self.model, 0),
             control_period: self.control_period,
@@ -79,12 +79,14 @@ impl Simulation {
             time_limit: self.time_limit,
             sensor_range: self.sensor_range,
             disturbance: self.disturbance.map(|bound| Disturbance { bound, period: 0.5 }),
+            trace,
         }
     }
 
-    /// The simulator of these settings, its model fetched from the server.
-    async fn connect(&self, client: &FastrackClient) -> anyhow::Result<Arc<Simulator>> {
-        let simulator = Simulator::connect(client, self.settings()).await;
+    /// The simulator of these settings, its model fetched from the server; `trace`: PF's runs record the
+    /// online loop's trace.
+    async fn connect(&self, client: &FastrackClient, trace: bool) -> anyhow::Result<Arc<Simulator>> {
+        let simulator = Simulator::connect(client, self.settings(trace)).await;
         Ok(Arc::new(simulator.with_context(|| format!("preparing runs of model {}", self.model))?))
     }
 }
@@ -189,6 +191,10 @@ struct BenchArgs {
     /// then keeps them for `sim merge --visits`.
     #[arg(long)]
     visits: Option<PathBuf>,
+    /// Write the online loop's golden trace of every PF run into this folder, as `pf-world-<seed>.json`
+    /// (what the loop was given and decided at every control period; docs/online-loop.md).
+    #[arg(long)]
+    traces: Option<PathBuf>,
     #[command(flatten)]
     recording: Recording,
     #[command(flatten)]
@@ -296,7 +302,7 @@ fn run_line(run: &Run) -> String {
 }
 
 async fn run_one(client: &FastrackClient, args: RunArgs, json_mode: bool) -> anyhow::Result<()> {
-    let simulator = args.simulation.connect(client).await?;
+    let simulator = args.simulation.connect(client, false).await?;
     let beta_l = simulator.speeds()[0].beta;
     let world = world_of(args.world.as_ref(), &args.generation, args.seed, simulator.steb_radius())?;
     let method = Method::parse(&args.method).map_err(anyhow::Error::msg)?;
@@ -326,7 +332,10 @@ async fn bench(client: &FastrackClient, args: BenchArgs, json_mode: bool) -> any
         shard.is_whole() || args.part_dir.is_some(),
         "--shard {shard} writes a part: give --part-dir (merge the parts with `fastrack sim merge`)"
     );
-    let simulator = args.simulation.connect(client).await?;
+    let simulator = args.simulation.connect(client, args.traces.is_some()).await?;
+    if let Some(dir) = &args.traces {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating the traces folder {}", dir.display()))?;
+    }
     let methods: Vec<Method> =
         args.methods.iter().map(|m| Method::parse(m)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
     let seeds: Vec<u64> = (1..=args.worlds).filter(|&seed| shard.takes(seed as usize - 1)).collect();
@@ -344,11 +353,17 @@ async fn bench(client: &FastrackClient, args: BenchArgs, json_mode: bool) -> any
     for (seed, world) in &worlds {
         for (m, method) in methods.iter().enumerate() {
             let (simulator, world, method, bar) = (Arc::clone(&simulator), world.clone(), method.clone(), bar.clone());
-            let (slots, seed) = (Arc::clone(&slots), *seed);
+            let (slots, seed, traces) = (Arc::clone(&slots), *seed, args.traces.clone());
             tasks.push(tokio::spawn(async move {
                 let _slot = slots.acquire_owned().await?;
                 let label = method.label();
-                let done = simulator.spawn_run(world, method, seed).await.context("a run's thread failed")?;
+                let mut done = simulator.spawn_run(world, method, seed).await.context("a run's thread failed")?;
+                if let (Ok(run), Some(dir)) = (&mut done, &traces) {
+                    if let Some(trace) = run.trace.take() {
+                        let path = dir.join(format!("pf-world-{seed}.json"));
+                        trace.write(&path).with_context(|| format!("writing the trace {}", path.display()))?;
+                    }
+                }
                 bar.set_message(format!("world {seed} {label}"));
                 bar.inc(1);
                 anyhow::Ok(BenchRun::new(seed, m, done?, keep_visits))
@@ -513,7 +528,7 @@ fn report(
 }
 
 async fn fleet(client: &FastrackClient, args: FleetArgs, json_mode: bool) -> anyhow::Result<()> {
-    let simulator = args.simulation.connect(client).await?;
+    let simulator = args.simulation.connect(client, false).await?;
     let mut lines = Vec::new();
     let mut figures = Vec::new();
     for &robots in &args.robots {

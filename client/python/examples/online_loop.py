@@ -103,7 +103,6 @@ def simulate(
     substeps: int = 4,
     time_limit: float = 60.0,
     sensor_range: float | None = None,
-    seed: int = 1,
 ) -> Outcome:
     """Drives the robot through ``world`` until it is within ``goal_radius`` of the goal, leaves the safe
     set, or ``time_limit`` simulated seconds pass."""
@@ -117,7 +116,6 @@ def simulate(
         bounds=world.bounds,
         control_period=control_period,
         planner=planner,
-        seed=seed,
     ) as loop:
         sensing = sensor_range if sensor_range is not None else 2.0 * loop.speeds[-1].bound
         for k in range(math.ceil(time_limit / control_period)):

@@ -68,7 +68,7 @@ def online(
     reset_candidates: int = 64,
 ) -> OnlineLoop:
     """The Rust tests' settings: start (0, 0), goal (10, 0), workspace [-2, 12] x [-6, 6], dt 0.1 s, 64 reset
-    candidates, seed 5; A* raw paths."""
+    candidates; A* raw paths."""
     return OnlineLoop(
         client,
         MODEL,
@@ -78,7 +78,6 @@ def online(
         control_period=control_period,
         planner=planner,
         reset_candidates=reset_candidates,
-        seed=5,
     )
 
 
@@ -492,7 +491,7 @@ def test_closed_loop_run_reaches_the_goal_safely(client: fastrack.Client) -> Non
     s = [start[0], start[1], ALONG_X, 0.5]
     run = ClosedLoopRun()
     with OnlineLoop(
-        client, MODEL, start=start, goal=goal, bounds=((0.0, 0.0), (16.0, 10.0)), control_period=dt, seed=7
+        client, MODEL, start=start, goal=goal, bounds=((0.0, 0.0), (16.0, 10.0)), control_period=dt
     ) as loop:
         sensor_range = 2.0 * loop.speeds[-1].bound
         for k in range(int(time_limit / dt)):

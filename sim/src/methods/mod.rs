@@ -8,9 +8,10 @@ mod parametric;
 
 pub use levels::LevelPlanner;
 pub use mppi::{Mppi, MppiSettings};
-pub use parametric::Parametric;
+pub use parametric::{Parametric, RESET_CANDIDATES};
 
 use crate::backend::Backend;
+use crate::trace::LoopTrace;
 use crate::tracker::Tracker;
 use crate::visits::Visit;
 use crate::world::World;
@@ -123,6 +124,12 @@ pub enum MethodError {
 pub struct Context {
     /// Where the answers about the model come from.
     pub backend: Backend,
+    /// The model's name.
+    pub model_name: String,
+    /// The model's version.
+    pub model_version: u32,
+    /// Record the online loop's trace (Parametric FaSTrack).
+    pub trace: bool,
     /// Its TEB table as the planner-speed rules read it.
     pub speeds: Vec<SpeedRow>,
     /// How many parameters an item carries (every one set to `beta`).
@@ -173,6 +180,14 @@ impl Controller {
             Controller::Parametric(method) => method.step(tracker, sensed).await,
             Controller::Levels(method) => method.step(tracker, sensed).await,
             Controller::Mppi(method) => method.step(tracker, sensed),
+        }
+    }
+
+    /// The online loop's trace of the run so far, if one was recorded (Parametric FaSTrack).
+    pub fn take_trace(&mut self) -> Option<LoopTrace> {
+        match self {
+            Controller::Parametric(method) => method.take_trace(),
+            Controller::Levels(_) | Controller::Mppi(_) => None,
         }
     }
 

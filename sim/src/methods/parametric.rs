@@ -3,16 +3,22 @@
 
 use super::{Context, Decision, MethodError};
 use crate::backend::BackendOracle;
+use crate::trace::{LoopTrace, TraceStep, FORMAT};
 use crate::visits::Visit;
 use fastrack_online::core::CoreSettings;
 use fastrack_online::geometry::{Obstacle, Point};
 use fastrack_online::online_loop::{Branch, OnlineLoop};
 use fastrack_online::raw_path::GridAStar;
 
+/// Reset candidates a reset asks about before the planner holds.
+pub const RESET_CANDIDATES: usize = 256;
+
 /// Parametric FaSTrack, running.
 pub struct Parametric {
     online: OnlineLoop<BackendOracle>,
     planner: GridAStar,
+    /// The run's trace, when the context asks for one.
+    trace: Option<LoopTrace>,
 }
 
 impl Parametric {
@@ -22,17 +28,43 @@ impl Parametric {
             control_period: context.control_period,
             goal: context.world.goal,
             bounds: context.world.bounds(),
-            reset_candidates: 256,
-            seed: context.seed,
+            reset_candidates: RESET_CANDIDATES,
         };
         settings.check().map_err(|e| MethodError::Setup(e.to_string()))?;
         let oracle = context.backend.oracle().await?;
-        Ok(Self { online: OnlineLoop::new(oracle, settings, start)?, planner: GridAStar::default() })
+        let trace = context.trace.then(|| LoopTrace {
+            format: FORMAT.into(),
+            model: context.model_name.clone(),
+            version: context.model_version,
+            control_period: settings.control_period,
+            goal: settings.goal,
+            bounds: [settings.bounds.0, settings.bounds.1],
+            reset_candidates: settings.reset_candidates,
+            start,
+            steps: Vec::new(),
+        });
+        Ok(Self { online: OnlineLoop::new(oracle, settings, start)?, planner: GridAStar::default(), trace })
+    }
+
+    /// The run's trace so far (`None` unless the context asked for one).
+    pub fn take_trace(&mut self) -> Option<LoopTrace> {
+        self.trace.take()
     }
 
     /// One step of Alg. 3.
     pub async fn step(&mut self, tracker: &[f64], sensed: &[Obstacle]) -> Result<Decision, MethodError> {
+        let mut new = Vec::new();
+        if self.trace.is_some() {
+            for obstacle in sensed {
+                if !self.online.obstacles().contains(obstacle) && !new.contains(obstacle) {
+                    new.push(obstacle.clone());
+                }
+            }
+        }
         let report = self.online.step(tracker, sensed, &mut self.planner).await?;
+        if let Some(trace) = &mut self.trace {
+            trace.steps.push(TraceStep::new(tracker, new, &report));
+        }
         Ok(Decision {
             control: report.control,
             planner: Some(report.planner),

@@ -477,6 +477,20 @@ class StepReport:
     below the verification horizon."""
 
 
+def reset_candidates(position: Point, radius: float, count: int) -> list[Point]:
+    """``count`` reset candidates in the disc of radius ``radius`` around ``position``: the position itself
+    first, then a sunflower spiral, point ``k`` at distance ``radius sqrt((k - 1/2) / (count - 1))`` and angle
+    ``k`` times the golden angle ``pi (3 - sqrt 5)``. The same points as the Rust core's
+    ``fastrack_online::core::reset_candidates``, so both loops ask about the same states."""
+    golden_angle = math.pi * (3.0 - math.sqrt(5.0))
+    rest = float(max(count - 1, 0))
+    points = [position] if count > 0 else []
+    for k in range(1, count):
+        distance, angle = radius * math.sqrt((k - 0.5) / rest), k * golden_angle
+        points.append((position[0] + distance * math.cos(angle), position[1] + distance * math.sin(angle)))
+    return points
+
+
 class OnlineLoop:
     """The online loop of one robot (Alg. 3) over one ``Track`` stream of ``model``.
 
@@ -484,7 +498,8 @@ class OnlineLoop:
     metres for ``dubins4d``); ``bounds`` = ``(min, max)`` the workspace the raw path stays in;
     ``control_period`` the control period ``dt`` in seconds (the planner moves at most ``beta_query dt``
     per axis per step); ``planner`` the raw-path planner (:class:`GridAStar` by default);
-    ``reset_candidates`` how many reset candidates a reset asks about before the planner holds; ``seed`` seeds them.
+    ``reset_candidates`` how many reset candidates a reset asks about before the planner holds (the points of
+    :func:`reset_candidates`).
     The model's description (its TEB table, ``Q``) is fetched with ``GetModel`` and its stream opened at
     once; use the loop as a context manager, or call :meth:`close`.
     """
@@ -500,7 +515,6 @@ class OnlineLoop:
         control_period: float,
         planner: RawPathPlanner | None = None,
         reset_candidates: int = 256,
-        seed: int = 0,
         version: int = 0,
         idle_timeout: float = 0.0,
     ) -> None:
@@ -539,7 +553,6 @@ class OnlineLoop:
                 f"n_state x 2 = {2 * self._n_state}"
             )
         self._q = q
-        self._rng = np.random.default_rng(seed)
         self._beta_query = self._speeds[-1].beta
         self._certificate_horizon = certificate_horizon(info)
         # The robot starts at rest on the planner.
@@ -792,18 +805,10 @@ class OnlineLoop:
     ) -> tuple[tuple[Point, TrackingControl, int] | None, int]:
         """The first free reset candidate with ``s - Q p`` in the certified set of ``row`` and the trained
         domain, with the batch's answer and its index there: the tracker's own position first, then points
-        drawn uniformly in the disc of the row's radius around it, the free ones asked about in one
+        of :func:`reset_candidates` in the disc of the row's radius around it, the free ones asked about in one
         ``TrackingControl`` batch. Also returns the calls made."""
-        free: list[Point] = []
-        for k in range(self.reset_candidates):
-            if k == 0:
-                candidate = position
-            else:
-                radius = row.bound * math.sqrt(self._rng.random())
-                angle = math.tau * self._rng.random()
-                candidate = (position[0] + radius * math.cos(angle), position[1] + radius * math.sin(angle))
-            if clearance(self._obstacles, candidate) > steb_radius:
-                free.append(candidate)
+        candidates = reset_candidates(position, row.bound, self.reset_candidates)
+        free = [p for p in candidates if clearance(self._obstacles, p) > steb_radius]
         if not free:
             return None, 0
         states = np.array([self._relative_state(tracker, p) for p in free])
