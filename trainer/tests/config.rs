@@ -8,7 +8,8 @@ use std::sync::atomic::AtomicBool;
 use std::sync::Arc;
 
 fn base_text() -> String {
-    std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/double_integrator.toml")).unwrap()
+    std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/experiments/double_integrator.toml"))
+        .unwrap()
 }
 
 fn load(text: &str) -> Result<TrainConfig, String> {
@@ -19,17 +20,19 @@ fn load(text: &str) -> Result<TrainConfig, String> {
 }
 
 #[test]
-fn shipped_configs_are_valid() {
-    let dir = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
+fn every_config_in_the_repository_is_valid() {
+    let root = Path::new(env!("CARGO_MANIFEST_DIR")).join("configs");
     let mut checked = 0;
-    for entry in std::fs::read_dir(&dir).unwrap() {
-        let path = entry.unwrap().path();
-        if path.extension().is_some_and(|e| e == "toml") {
-            TrainConfig::load(&path).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
-            checked += 1;
+    for dir in [root.clone(), root.join("experiments")] {
+        for entry in std::fs::read_dir(&dir).unwrap() {
+            let path = entry.unwrap().path();
+            if path.extension().is_some_and(|e| e == "toml") {
+                TrainConfig::load(&path).unwrap_or_else(|e| panic!("{}: {e:#}", path.display()));
+                checked += 1;
+            }
         }
     }
-    assert!(checked >= 5, "only {checked} configs found in {}", dir.display());
+    assert!(checked >= 7, "only {checked} configs found in {} and its experiments/", root.display());
 }
 
 #[test]

@@ -19,11 +19,11 @@ use std::sync::Arc;
 /// Largest mean relative TEB error over the table's rows accepted from the committed recipe.
 const MEAN_TOLERANCE: f64 = 0.75;
 
-/// Trains `trainer/configs/double_integrator.toml` with the Hamiltonian multiplied by `sign`; returns the
+/// Trains `trainer/configs/experiments/double_integrator.toml` with the Hamiltonian multiplied by `sign`; returns the
 /// mean relative error of the TEB table's measured minima against the closed form, or why the learned
 /// function has no table (a minimum at or below 0).
 fn mean_teb_error(sign: f64) -> Result<f64, String> {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/double_integrator.toml");
+    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/experiments/double_integrator.toml");
     let config = TrainConfig::load(&path).unwrap();
     let system = config.system().unwrap();
     let run = tempfile::tempdir().unwrap();

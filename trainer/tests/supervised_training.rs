@@ -81,10 +81,12 @@ fn mean_hji_residual(network: &ValueNetwork, system: &AffineSystem, tau_max: f64
     total / RESIDUAL_SAMPLES as f64
 }
 
-/// Solves the config's grids into a temporary folder, trains `configs/double_integrator_supervised.toml` on
+/// Solves the config's grids into a temporary folder, trains
+/// `configs/experiments/double_integrator_supervised.toml` on
 /// them with the Hamiltonian multiplied by `sign`, and measures the table and the residual.
 fn train_supervised(sign: f64) -> Outcome {
-    let path = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/double_integrator_supervised.toml");
+    let path =
+        std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/experiments/double_integrator_supervised.toml");
     let mut config = TrainConfig::load(&path).unwrap();
     let system = config.system().unwrap();
     let dir = tempfile::tempdir().unwrap();

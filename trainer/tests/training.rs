@@ -129,7 +129,7 @@ fn circle_features_chain_rule_equals_autodiff() {
 #[test]
 fn exact_boundary_model_satisfies_the_boundary_condition() {
     let device = device();
-    let config = config("configs/double_integrator.toml");
+    let config = config("configs/experiments/double_integrator.toml");
     let system = config.system().unwrap();
     let network = initial_network(&config, &system);
     let model = Siren::from_network(&network, &device);
@@ -208,7 +208,7 @@ fn vertex_velocities_give_the_hamiltonian() {
 fn semi_lagrangian_residual_tends_to_the_differential_one() {
     use fastrack_trainer::config::{LossForm, Residual};
     let device = device();
-    let mut config = config("configs/double_integrator.toml");
+    let mut config = config("configs/experiments/double_integrator.toml");
     // A smooth network whose value stays well above l, so that both residuals are dV/dtau - H.
     config.loss.form = LossForm::Paper;
     config.network.omega_0 = 3.0;
