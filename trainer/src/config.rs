@@ -222,6 +222,11 @@ pub struct SupervisionConfig {
     /// lower `beta` (domains scaled to each `beta`'s error set), only these rows supervise its outer part.
     #[serde(default)]
     pub own_grid_share: f64,
+    /// Share of the targets drawn on the zero-error slice (every error coordinate at 0, the others anywhere
+    /// in the grid; default 0): where every start and every planner reset puts a robot, so where a value
+    /// below the truth admits states into a certified set that the error then leaves.
+    #[serde(default)]
+    pub slice_share: f64,
     /// Multiplies the squared value error where the network is below the grid (default 1: symmetric). A
     /// value below the truth makes the tracking error bound too small, the unsafe side; above 1 the fit
     /// settles on the grid from above where it cannot match it exactly.
@@ -328,6 +333,10 @@ impl TrainConfig {
             ensure!((0.0..=1.0).contains(&sup.focus_share), "supervision.focus_share must be in [0, 1]");
             ensure!(sup.focus_factor.is_finite() && sup.focus_factor >= 1.0, "supervision.focus_factor must be >= 1");
             ensure!((0.0..=1.0).contains(&sup.own_grid_share), "supervision.own_grid_share must be in [0, 1]");
+            ensure!(
+                (0.0..=1.0).contains(&sup.slice_share) && sup.slice_share + sup.own_grid_share <= 1.0,
+                "supervision.slice_share must be in [0, 1 - own_grid_share]"
+            );
             ensure!(sup.under_weight.is_finite() && sup.under_weight >= 1.0, "supervision.under_weight must be >= 1");
         }
         ensure!(!self.export.name.is_empty() && self.export.version > 0, "export needs a name and a positive version");

@@ -66,6 +66,10 @@ pub struct GridSupervision {
     focus_share: f64,
     /// Share of the rows drawn at a solution's own parameters, anywhere in its grid.
     own_grid_share: f64,
+    /// Share of the rows drawn on the zero-error slice.
+    slice_share: f64,
+    /// The system's error coordinates (0 on the slice).
+    error_coords: Vec<usize>,
     seed: u64,
     /// Weight of the value error.
     pub weight: f64,
@@ -169,6 +173,8 @@ impl GridSupervision {
             points: config.points,
             focus_share: config.focus_share,
             own_grid_share: config.own_grid_share,
+            slice_share: config.slice_share,
+            error_coords: system.error_coords.clone(),
             seed,
             weight: config.weight,
             gradient_weight: config.gradient_weight,
@@ -196,6 +202,7 @@ impl GridSupervision {
         let n_params = self.solutions[0].params.len();
         let n_focus = (self.focus_share * m as f64).round() as usize;
         let first_own = m - (self.own_grid_share * m as f64).round() as usize;
+        let first_slice = first_own.saturating_sub((self.slice_share * m as f64).round() as usize);
         let (mut tau, mut state, mut params, mut target) = (
             Vec::with_capacity(m),
             Vec::with_capacity(m * n_state),
@@ -218,8 +225,12 @@ impl GridSupervision {
             };
             let (nearer, other) = if w < 0.5 { (a, b) } else { (b, a) };
             let focus = i < n_focus && !nearer.near_minimum.is_empty();
+            let on_slice = (first_slice..first_own).contains(&i);
             for draw in 1.. {
                 draw_in_cell(nearer, focus, &mut rng, &mut x);
+                if on_slice {
+                    self.error_coords.iter().for_each(|&k| x[k] = 0.0);
+                }
                 if inside(&other.solution, &x) {
                     break;
                 }

@@ -76,6 +76,11 @@ fn bad_supervision_sections_name_what_is_wrong() {
         ("points = 10", "points = 10\nfocus_share = 1.5", "supervision.focus_share must be in [0, 1]"),
         ("points = 10", "points = 10\nfocus_factor = 0.5", "supervision.focus_factor must be >= 1"),
         ("points = 10", "points = 10\nown_grid_share = 1.5", "supervision.own_grid_share must be in [0, 1]"),
+        (
+            "points = 10",
+            "points = 10\nown_grid_share = 0.6\nslice_share = 0.5",
+            "supervision.slice_share must be in [0, 1 - own_grid_share]",
+        ),
         ("points = 10", "points = 10\nunder_weight = 0.5", "supervision.under_weight must be >= 1"),
     ];
     let section = base.rfind("[supervision]").unwrap();

@@ -55,6 +55,7 @@ fn config(solutions: Vec<PathBuf>) -> SupervisionConfig {
         focus_share: 0.5,
         focus_factor: 2.0,
         own_grid_share: 0.0,
+        slice_share: 0.0,
         under_weight: 1.0,
         gradient_metric: GradientMetric::Euclidean,
     }
@@ -201,6 +202,38 @@ fn own_grid_rows_supervise_each_solution_at_its_own_beta_past_the_lower_grid() {
         past_the_cut += usize::from(beta == 1.0 && x[0] > 0.5 + 1e-6);
     }
     assert!(past_the_cut > 10, "rows of the wider grid past the cut: {past_the_cut}");
+}
+
+#[test]
+fn slice_rows_lie_at_zero_error_with_the_grids_value_there() {
+    // The 20% of rows before the 30% own-grid rows have the error coordinate at 0 and the speed anywhere;
+    // their targets are the blend of the two grids' values at that point, as every other row's.
+    let dir = tempfile::tempdir().unwrap();
+    let di = double_integrator::system();
+    let (low, low_solution) = solved(dir.path(), "low.ftgrid", &di, &[0.5], 0.3);
+    let (high, high_solution) = solved(dir.path(), "high.ftgrid", &di, &[1.0], 0.3);
+    let mut sliced = config(vec![low, high]);
+    (sliced.slice_share, sliced.own_grid_share) = (0.2, 0.3);
+    let batch = GridSupervision::load(&sliced, &di, 1.0, 3).unwrap().batch(2, &Device::flex());
+    let (state, params, target) = (rows(batch.state), rows(batch.params), rows(batch.target));
+    let (mut speeds, mut off_slice) = (Vec::new(), 0);
+    for i in 0..500 {
+        let x = [f64::from(state[2 * i]), f64::from(state[2 * i + 1])];
+        if !(250..350).contains(&i) {
+            off_slice += usize::from(x[0] != 0.0);
+            continue;
+        }
+        assert_eq!(x[0], 0.0, "slice row {i}: {x:?}");
+        speeds.push(x[1]);
+        let w = (f64::from(params[i]) - 0.5) / 0.5;
+        let value = |s: &Solution| s.grid.interpolate(&s.values, &x);
+        let expected = (1.0 - w) * value(&low_solution) + w * value(&high_solution);
+        assert!((f64::from(target[i]) - expected).abs() < 1e-4, "row {i}: target {} vs {expected}", target[i]);
+    }
+    assert_eq!(off_slice, 400, "every other row is drawn off the slice");
+    let spread =
+        speeds.iter().copied().fold(f64::NEG_INFINITY, f64::max) - speeds.iter().copied().fold(f64::INFINITY, f64::min);
+    assert!(spread > 1.0, "slice rows cover the speeds: spread {spread}");
 }
 
 #[test]
