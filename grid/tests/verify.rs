@@ -478,3 +478,21 @@ fn the_search_forces_larger_errors_than_random_planners_on_a_weak_control() {
     assert_eq!(report.searched, report.verification.samples, "every sample was searched");
     assert!(search > 1.2 * random, "the search forced {search}, random planners {random}");
 }
+
+#[test]
+fn a_set_that_reaches_the_domains_edge_is_not_verified() {
+    // At a level past the position's half-width the set holds states at the edge of the trained domain, where
+    // the model is extrapolated: flagged on the first round, whatever the rollouts find.
+    let (system, solution) = ground_truth();
+    let reach = system.state[0].max;
+    let network = fitted_network(system, solution, 1.0);
+    let (evaluator, bundle) = load(system, &network, 1.2 * reach);
+    let mut manifest = bundle.manifest.clone();
+    let beta = system.params[0].max;
+    let options = VerifyOptions { eps: 2e-2, delta: 1e-3, ..shipped_settings() };
+    let reports =
+        verify_table(&evaluator, &mut manifest, system, &bare_selection(&beta), &options, &ProgressBar::hidden())
+            .unwrap();
+    assert_eq!(reports[0].outcome, Outcome::LeftDomain, "{:?}", reports[0].rounds);
+    assert_eq!(reports[0].rounds.len(), 1);
+}

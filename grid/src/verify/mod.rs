@@ -285,8 +285,8 @@ pub enum Outcome {
     Verified,
     /// Every round had a violation.
     RoundsExhausted,
-    /// The raised level would take the sampled set past the trained domain's error coordinates, where the model
-    /// is extrapolated: the row cannot be verified at any level inside it.
+    /// A round's sampled set reached the trained domain's edge on an error coordinate (an accepted state within
+    /// 5% of it): past it the model is extrapolated, so the row cannot be verified at that level or above.
     LeftDomain,
 }
 
@@ -401,6 +401,8 @@ impl FamilyTally {
 /// What a round found.
 struct Round {
     report: RoundReport,
+    /// Whether a sampled state lay at the trained domain's edge on an error coordinate.
+    reached_domain_edge: bool,
     tally: FamilyTally,
     searched: usize,
     rollout_steps: u64,
@@ -435,6 +437,7 @@ fn run_round(
     let SampledRun { sampled, mut searched, mut rollout_steps } =
         run_samples(scene, &mut sampler, UNIFORM, level, n, options, rng, &mut tally)?;
     let acceptance = sampled.acceptance;
+    let mut reached_domain_edge = sampler.reached_domain_edge;
     let mut checks = vec![sampled.check];
     let mut worst = vec![sampled.worst];
     // A check whose set holds (almost) none of its distribution's states rolls nothing out, and says so.
@@ -457,6 +460,7 @@ fn run_round(
             Err(VerifyError::Sampling { .. }) => checks.push(empty(ZERO_ERROR_SLICE)),
             Err(e) => return Err(e),
         }
+        reached_domain_edge |= slice_sampler.reached_domain_edge;
     }
     let mut in_force = None;
     if let Some(recorded) = operational.filter(|_| checks.iter().all(|c| c.violations == 0)) {
@@ -493,6 +497,7 @@ fn run_round(
             checks,
             in_force,
         },
+        reached_domain_edge,
         tally,
         searched,
         rollout_steps,
@@ -649,12 +654,6 @@ pub fn verify_row(
         level = level.max(sampler.quantile_level(options.min_acceptance, &mut rng)?);
     }
     let (mut rounds, mut rollout_steps) = (Vec::new(), 0u64);
-    // The error coordinates' reach inside the trained domain: a set past it is extrapolated.
-    let reach = system
-        .error_coords
-        .iter()
-        .map(|&i| manifest.state[i].min.abs().min(manifest.state[i].max.abs()))
-        .fold(f64::INFINITY, f64::min);
     let first_level = level;
     let (domain_lo, domain_hi): (Vec<f64>, Vec<f64>) = manifest.state.iter().map(|d| (d.min, d.max)).unzip();
     let (last, outcome) = loop {
@@ -681,6 +680,9 @@ pub fn verify_row(
         );
         rollout_steps += round.rollout_steps;
         rounds.push(round.report.clone());
+        if round.reached_domain_edge {
+            break (round, Outcome::LeftDomain);
+        }
         if round.report.violations == 0 {
             break (round, Outcome::Verified);
         }
@@ -688,9 +690,6 @@ pub fn verify_row(
             break (round, Outcome::RoundsExhausted);
         }
         level = round.report.max_error.max(level * (1.0 + MIN_RAISE));
-        if level > reach {
-            break (round, Outcome::LeftDomain);
-        }
     };
     Ok(RowReport {
         beta: row.beta,

@@ -4,7 +4,10 @@
 //! since `V >= l` for a value function of the tracking error, the set lies within `|e| <= level` and the
 //! narrowing only discards proposals that could not be accepted. A learned `V` can dip below `l`, so the
 //! narrowing is checked rather than trusted: an accepted state within 5% of a narrowed edge means the set may
-//! reach past it, and sampling stops with an error instead of returning a biased sample.
+//! reach past it, and sampling stops with an error instead of returning a biased sample. An accepted state
+//! near the trained domain's edge on an error coordinate is recorded
+//! ([`SublevelSampler::reached_domain_edge`]): the set reaches past the domain there, where `V` is
+//! extrapolated.
 
 use super::VerifyError;
 use fastrack_valuefn::manifest::Manifest;
@@ -37,6 +40,10 @@ pub(super) struct SublevelSampler<'a> {
     hi: Vec<f64>,
     /// Error coordinates whose range was narrowed, with their half-width.
     narrowed: Vec<(usize, f64)>,
+    /// The trained domain's range of each error coordinate.
+    error_domain: Vec<(usize, f64, f64)>,
+    /// Whether an accepted state lay within 5% of the trained domain's edge on an error coordinate.
+    pub reached_domain_edge: bool,
     names: Vec<String>,
     /// Proposals drawn so far.
     pub proposed: usize,
@@ -73,9 +80,15 @@ impl<'a> SublevelSampler<'a> {
             evaluator,
             params: params.iter().map(|&p| p as f32).collect(),
             level,
+            error_domain: system
+                .error_coords
+                .iter()
+                .map(|&i| (i, manifest.state[i].min, manifest.state[i].max))
+                .collect(),
             lo,
             hi,
             narrowed,
+            reached_domain_edge: false,
             names: manifest.state.iter().map(|d| d.name.clone()).collect(),
             proposed: 0,
             accepted: 0,
@@ -93,6 +106,11 @@ impl<'a> SublevelSampler<'a> {
         self.narrowed.clear();
         (self.proposed, self.accepted) = (0, 0);
         self
+    }
+
+    /// Whether `state` lies within 5% of the trained domain's edge on an error coordinate.
+    fn at_domain_edge(&self, state: &[f64]) -> bool {
+        self.error_domain.iter().any(|&(i, lo, hi)| (state[i] - 0.5 * (hi + lo)).abs() > EDGE_GUARD * 0.5 * (hi - lo))
     }
 
     /// The level sampled under.
@@ -172,6 +190,7 @@ impl StateSource for SublevelSampler<'_> {
                         continue;
                     }
                     self.accepted += 1;
+                    self.reached_domain_edge |= self.at_domain_edge(state);
                     if let Some(&(i, w)) = self.narrowed.iter().find(|&&(i, w)| state[i].abs() > EDGE_GUARD * w) {
                         return Err(VerifyError::Setting(format!(
                             "a state of {{V <= {}}} lies at {} on `{}`, at the edge of the proposal box (+-{w}): the learned value dips below the tracking error there; raise the proposal box factor",
