@@ -127,7 +127,15 @@ fn write_bundle(
         .map(|i| {
             let beta = beta_l + (beta_u - beta_l) * i as f64 / (MIN_TEB_ROWS - 1) as f64;
             let level = level_at_beta_u * (beta / beta_u).powi(2);
-            TebRow { beta, level, measured_min: level, extent: vec![level], boundary_radii: vec![], verification: None }
+            TebRow {
+                beta,
+                level,
+                measured_min: level,
+                extent: vec![level],
+                boundary_radii: vec![],
+                verification: None,
+                nested_share: None,
+            }
         })
         .collect();
     let manifest = Manifest {

@@ -57,6 +57,7 @@ pub fn model_info(m: &Manifest, space: &StateSpace) -> pb::ModelInfo {
                 verified_level: row.verification.as_ref().map(|v| v.verified_level),
                 extent: row.extent.clone(),
                 verification: row.verification.as_ref().map(verification),
+                nested_share: row.nested_share,
             })
             .collect(),
         untrained: m.untrained,

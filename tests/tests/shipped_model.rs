@@ -1,7 +1,8 @@
 //! The shipped trained model `models/dubins4d/4`, served by the real server: it loads (checksum, schema,
 //! graph), says it is trained and verified, serves its table as written, its values keep the property every
 //! value function has, `V >= l` (the error can only be at least the current one), on random states, and its
-//! served control never pushes the speed past the tracker's limits.
+//! served control never pushes the speed past the tracker's limits. Every row's certified set holds states
+//! of a robot on its planner, and the table says how far each set lies in the next one's.
 
 use fastrack_client::{model_ref, pb};
 use fastrack_e2e::{evaluator_for, TestServer};
@@ -91,4 +92,67 @@ async fn the_shipped_dubins4d_model_is_trained_verified_and_served() {
     // moving inwards.
     eprintln!("at the upper limit {braking} of {} brake; at the lower {accelerating} accelerate", n / 2);
     assert!(braking > 0 && accelerating > 0);
+}
+
+/// Uniform states of dubins4d's domain with the position error within `reach`, `count` of them.
+fn proposals(rng: &mut impl Rng, reach: f64, count: usize) -> Vec<f64> {
+    (0..count)
+        .flat_map(|_| {
+            [
+                rng.random_range(-reach..reach),
+                rng.random_range(-reach..reach),
+                rng.random_range(-std::f64::consts::PI..std::f64::consts::PI),
+                rng.random_range(0.0..3.0),
+            ]
+        })
+        .collect()
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_certified_set_can_be_entered_and_the_table_says_where_they_nest() {
+    let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
+    let (_server, client) = TestServer::start_serving(&repo).await;
+    let model = || model_ref("dubins4d", 4);
+    let table = client.get_model(model()).await.unwrap().teb_table;
+    let in_teb = |states: Vec<f64>, beta: f64| {
+        let params = vec![beta; states.len() / 4];
+        let client = &client;
+        async move { client.evaluate_value(model(), states, params, pb::OutOfDomainPolicy::Flag).await.unwrap().in_teb }
+    };
+    let mut rng = rand::rngs::StdRng::seed_from_u64(5);
+
+    // A robot on its planner (zero position error) at some heading and speed lies in every row's set.
+    for row in &table {
+        let slice: Vec<f64> = proposals(&mut rng, 1.0, 2000).chunks(4).flat_map(|s| [0.0, 0.0, s[2], s[3]]).collect();
+        let inside = in_teb(slice, row.beta).await.iter().filter(|&&b| b).count();
+        assert!(inside >= 20, "beta {}: {inside} of 2000 zero-error states in the certified set", row.beta);
+    }
+
+    // Every row but the last says how much of its set lies in the next one's; checked on the least and the
+    // most nested rows against the server's own membership of uniform samples of the set.
+    let (last, rest) = table.split_last().unwrap();
+    assert_eq!(last.nested_share, None);
+    let shares: Vec<f64> = rest.iter().map(|r| r.nested_share.expect("measured")).collect();
+    assert!(shares.iter().all(|s| (0.0..=1.0).contains(s)), "{shares:?}");
+    let least = (0..shares.len()).min_by(|&a, &b| shares[a].total_cmp(&shares[b])).unwrap();
+    let most = (0..shares.len()).max_by(|&a, &b| shares[a].total_cmp(&shares[b])).unwrap();
+    for i in [least, most] {
+        let (row, next) = (&table[i], &table[i + 1]);
+        let mut samples = Vec::new();
+        while samples.len() < 4 * 600 {
+            let states = proposals(&mut rng, (2.5 * row.set_level).min(3.0), 4096);
+            let inside = in_teb(states.clone(), row.beta).await;
+            samples.extend(states.chunks(4).zip(inside).filter(|(_, b)| *b).flat_map(|(s, _)| s.to_vec()));
+        }
+        let n = samples.len() / 4;
+        let nested = in_teb(samples, next.beta).await.iter().filter(|&&b| b).count() as f64 / n as f64;
+        let share = shares[i];
+        // Two binomial estimates of one share (2,000 and ~600 samples): within about 4 standard deviations.
+        assert!(
+            (nested - share).abs() <= 0.08,
+            "beta {}: {nested:.3} of {n} samples nested, table says {share}",
+            row.beta
+        );
+    }
+    assert!(shares[least] < 0.9, "the shipped table has rows whose sets do not nest: {shares:?}");
 }

@@ -201,6 +201,12 @@ pub struct TebRow {
     /// Scenario verification of this row, once run.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub verification: Option<Verification>,
+    /// Share of this row's certified set (uniform samples) that lies inside the next faster row's certified
+    /// set: 1 where the two nest. From the states outside, a robot offered the faster row is refused it (the
+    /// online loop advances under the bound in force instead). Absent for the last row, for a table not yet
+    /// measured, and where the set was too small to sample.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub nested_share: Option<f64>,
 }
 
 impl TebRow {

@@ -201,13 +201,76 @@ pub fn reshape_at_set_levels(
     options: &TebOptions,
 ) -> Result<(), String> {
     let mut rng = rand::rngs::StdRng::seed_from_u64(options.seed);
-    for row in rows {
+    for row in rows.iter_mut() {
         let params = vec![row.beta; system.n_params()];
         let (extent, boundary_radii) = error_set_shape(oracle, system, &params, row.set_level(), options, &mut rng)?;
         row.extent = extent;
         row.boundary_radii = boundary_radii;
     }
+    let shares = nested_shares(oracle, system, rows, &mut rng)?;
+    for (row, share) in rows.iter_mut().zip(shares) {
+        row.nested_share = share;
+    }
     Ok(())
+}
+
+/// Uniform samples of a row's certified set behind its nested share.
+const NESTING_SAMPLES: usize = 2_000;
+/// Proposals per row before a set counts as too small to sample.
+const NESTING_PROPOSALS: usize = 2_000_000;
+/// Proposals per oracle call.
+const NESTING_CHUNK: usize = 8_192;
+
+/// For every row but the last, the share of its certified set `{V(.; beta_i) <= set level_i}` that lies in
+/// the next row's `{V(.; beta_i+1) <= set level_i+1}`, from [`NESTING_SAMPLES`] uniform samples (rejection from
+/// the state box with the error coordinates narrowed to `2.5` set levels, where a value of the tracking error
+/// keeps the set); `None` for the last row and where fewer than a tenth of the samples were found.
+pub fn nested_shares(
+    oracle: &dyn ValueOracle,
+    system: &AffineSystem,
+    rows: &[TebRow],
+    rng: &mut impl Rng,
+) -> Result<Vec<Option<f64>>, String> {
+    let n_state = system.n_state();
+    let mut shares = vec![None; rows.len()];
+    for (i, pair) in rows.windows(2).enumerate() {
+        let (row, next) = (&pair[0], &pair[1]);
+        let reach = 2.5 * row.set_level();
+        let (lo, hi): (Vec<f64>, Vec<f64>) =
+            system
+                .state
+                .iter()
+                .enumerate()
+                .map(|(k, d)| {
+                    if system.error_coords.contains(&k) {
+                        (d.min.max(-reach), d.max.min(reach))
+                    } else {
+                        (d.min, d.max)
+                    }
+                })
+                .unzip();
+        let (mut inside, mut nested, mut proposed) = (Vec::new(), 0usize, 0usize);
+        while inside.len() < NESTING_SAMPLES * n_state && proposed < NESTING_PROPOSALS {
+            let states: Vec<f64> =
+                (0..NESTING_CHUNK * n_state).map(|k| rng.random_range(lo[k % n_state]..=hi[k % n_state])).collect();
+            proposed += NESTING_CHUNK;
+            let params = vec![row.beta; NESTING_CHUNK * system.n_params()];
+            let (values, _) = oracle.values_and_grads(&states, &params)?;
+            for (state, v) in states.chunks(n_state).zip(values) {
+                if v <= row.set_level() && inside.len() < NESTING_SAMPLES * n_state {
+                    inside.extend_from_slice(state);
+                }
+            }
+        }
+        let found = inside.len() / n_state;
+        if found >= NESTING_SAMPLES / 10 {
+            let params = vec![next.beta; found * system.n_params()];
+            let (values, _) = oracle.values_and_grads(&inside, &params)?;
+            nested += values.iter().filter(|&&v| v <= next.set_level()).count();
+            shares[i] = Some(nested as f64 / found as f64);
+        }
+    }
+    Ok(shares)
 }
 
 /// Builds the TEB table of `oracle` for `system` (every parameter set to the row's `beta`).
@@ -243,7 +306,7 @@ pub fn teb_table(oracle: &dyn ValueOracle, system: &AffineSystem, options: &TebO
         running_max = running_max.max(measured_min);
         let level = running_max;
         let (extent, boundary_radii) = error_set_shape(oracle, system, &params, level, options, &mut rng)?;
-        rows.push(TebRow { beta, level, measured_min, extent, boundary_radii, verification: None });
+        rows.push(TebRow { beta, level, measured_min, extent, boundary_radii, verification: None, nested_share: None });
     }
     Ok(TebReport { rows, non_monotone })
 }

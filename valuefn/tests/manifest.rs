@@ -36,6 +36,7 @@ fn manifest() -> Manifest {
                 measured_min: 0.3,
                 extent: vec![0.1, 0.1],
                 boundary_radii: vec![0.1; 8],
+                nested_share: None,
                 verification: None,
             })
             .collect(),
@@ -180,6 +181,7 @@ fn a_row_serves_the_set_it_certified_and_the_bound_from_inside_it() {
         measured_min: 0.5876,
         extent: vec![0.6, 0.6],
         boundary_radii: Vec::new(),
+        nested_share: None,
         verification: None,
     };
     // Unverified: the learned level for both.

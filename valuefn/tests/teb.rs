@@ -1,8 +1,10 @@
 //! The TEB table refuses a value function with a negative minimum, saying where it is: no tracking value
 //! function has one (`V >= l >= 0`), and the state tells the model's author which region was not learned.
 
+use fastrack_valuefn::manifest::TebRow;
 use fastrack_valuefn::system::double_integrator;
-use fastrack_valuefn::teb::{teb_table, TebOptions, ValueOracle};
+use fastrack_valuefn::teb::{nested_shares, teb_table, TebOptions, ValueOracle};
+use rand::SeedableRng;
 
 /// `V(r) = |r - c|^2 - 1`: negative around `c`, least (-1) at `c`.
 struct Dip {
@@ -31,4 +33,46 @@ fn a_negative_minimum_is_refused_with_the_state_where_it_lies() {
     // The refinement lands on the dip's centre: each coordinate named with its value to 3 decimals.
     let expected = format!("({} = 0.500, {} = -0.250)", names[0], names[1]);
     assert!(error.contains(&expected), "{error} should name {expected}");
+}
+
+/// `V(x, v; beta) = max(|x|, |v - shift(beta)|)`: each sublevel set a square in the `(x, v)` plane, centred
+/// on the speed `shift(beta)`.
+struct Squares;
+
+fn shift(beta: f64) -> f64 {
+    if beta < 0.6 {
+        0.0
+    } else {
+        0.25
+    }
+}
+
+impl ValueOracle for Squares {
+    fn values_and_grads(&self, states: &[f64], params: &[f64]) -> Result<(Vec<f64>, Vec<f64>), String> {
+        let values =
+            states.chunks(2).zip(params).map(|(r, &beta)| r[0].abs().max((r[1] - shift(beta)).abs())).collect();
+        Ok((values, vec![0.0; states.len()]))
+    }
+}
+
+#[test]
+fn nested_shares_are_the_overlap_of_each_set_with_the_next_ones() {
+    // Squares of half-width 0.5 at speeds 0 and 0.25 overlap in 0.75 of the first; the second lies inside the
+    // third (half-width 0.8, the same centre); the last row has no next one.
+    let row = |beta: f64, level: f64| TebRow {
+        beta,
+        level,
+        measured_min: level,
+        extent: vec![level],
+        boundary_radii: Vec::new(),
+        verification: None,
+        nested_share: None,
+    };
+    let rows = [row(0.5, 0.5), row(0.75, 0.5), row(1.0, 0.8)];
+    let mut rng = rand::rngs::StdRng::seed_from_u64(3);
+    let shares = nested_shares(&Squares, &double_integrator::system(), &rows, &mut rng).unwrap();
+    let first = shares[0].expect("the first set is sampled");
+    assert!((first - 0.75).abs() < 0.04, "overlap share {first}, expected 0.75");
+    assert_eq!(shares[1], Some(1.0));
+    assert_eq!(shares[2], None);
 }

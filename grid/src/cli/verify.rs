@@ -202,8 +202,8 @@ pub struct ReshapeArgs {
     ort_lib: Option<PathBuf>,
 }
 
-/// Runs `reshape`: every row's extent and boundary radii measured again at its set level, as verification
-/// leaves them, for a bundle whose shapes were measured at another level.
+/// Runs `reshape`: every row's extent, boundary radii and nested share measured again at its set level, as
+/// verification leaves them, for a bundle whose shapes were measured at another level.
 pub fn reshape(args: ReshapeArgs) -> anyhow::Result<()> {
     let Loaded { bundle, system, evaluator } = load(&args.bundle, args.ort_lib.as_deref())?;
     let mut manifest = bundle.manifest.clone();
@@ -211,12 +211,13 @@ pub fn reshape(args: ReshapeArgs) -> anyhow::Result<()> {
         .map_err(anyhow::Error::msg)?;
     for (before, after) in bundle.manifest.teb_table.iter().zip(&manifest.teb_table) {
         println!(
-            "beta {:.4}: set level {:.4}, bound {:.4}; extent {:?} -> {:?}",
+            "beta {:.4}: set level {:.4}, bound {:.4}; extent {:?} -> {:?}; in the next row's set {}",
             after.beta,
             after.set_level(),
             after.bound(),
             before.extent.iter().map(|x| format!("{x:.3}")).collect::<Vec<_>>(),
-            after.extent.iter().map(|x| format!("{x:.3}")).collect::<Vec<_>>()
+            after.extent.iter().map(|x| format!("{x:.3}")).collect::<Vec<_>>(),
+            after.nested_share.map_or("-".into(), |s| format!("{s:.3}"))
         );
     }
     let dir = Bundle::write(&args.out, manifest, &bundle.onnx)?;
