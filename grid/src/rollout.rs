@@ -14,7 +14,7 @@
 //! they can exploit.
 
 use crate::solver::Solution;
-use fastrack_valuefn::simulation::{step_relative, HeldInputs, Planner};
+use fastrack_valuefn::simulation::{step_relative, HeldInputs, PlannerPolicy};
 use fastrack_valuefn::system::{AffineSystem, DecomposedAxis};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -204,7 +204,7 @@ struct Scene<'a> {
 
 impl Scene<'_> {
     /// One rollout from `start` against `planner`.
-    fn roll_out(&self, start: &[f64], mut planner: Planner, rng: &mut StdRng) -> Reached {
+    fn roll_out(&self, start: &[f64], mut planner: PlannerPolicy, rng: &mut StdRng) -> Reached {
         let (system, options) = (self.system, self.options);
         let (mut r, mut p) = (start.to_vec(), vec![0.0; start.len()]);
         let steps = (options.horizon / options.step).round() as usize;
@@ -243,7 +243,7 @@ impl Scene<'_> {
             .enumerate()
             .flat_map_iter(|(i, start)| {
                 (0..=random).map(move |j| {
-                    let planner = if j == 0 { Planner::WorstCase } else { Planner::bang_bang() };
+                    let planner = if j == 0 { PlannerPolicy::WorstCase } else { PlannerPolicy::bang_bang() };
                     let seed = self.options.seed ^ ((i * (random + 1) + j) as u64).wrapping_mul(0x9E37_79B9);
                     let mut rng = StdRng::seed_from_u64(seed);
                     (j == 0, self.roll_out(start, planner, &mut rng))

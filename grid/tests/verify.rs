@@ -19,8 +19,8 @@
 use fastrack_grid::grid::Grid;
 use fastrack_grid::solver::{solve, Solution, SolverConfig};
 use fastrack_grid::verify::{
-    required_samples, verify_rows, verify_table, Outcome, RecordedStates, RowReport, SearchOptions, Selection, Tracker,
-    VerifyError, VerifyOptions, FALSIFICATION, OPERATIONAL, UNIFORM, ZERO_ERROR_SLICE,
+    required_samples, verify_rows, verify_table, ControlLaw, Outcome, RecordedStates, RowReport, SearchOptions,
+    Selection, VerifyError, VerifyOptions, FALSIFICATION, OPERATIONAL, UNIFORM, ZERO_ERROR_SLICE,
 };
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::manifest::{Manifest, NetworkInfo, Provenance, SystemInfo, TebRow, MIN_TEB_ROWS, SCHEMA_VERSION};
@@ -399,7 +399,7 @@ fn the_grid_policy_as_the_tracker_holds_the_weak_models_samples_within_the_grid_
     let (system, solution) = ground_truth();
     let (evaluator, bundle) = weak_model(system);
     let beta_u = system.params[0].max;
-    let options = |tracker| VerifyOptions {
+    let options = |control_law| VerifyOptions {
         eps: 0.1,
         delta: 0.01,
         level_margin: 0.0,
@@ -407,25 +407,25 @@ fn the_grid_policy_as_the_tracker_holds_the_weak_models_samples_within_the_grid_
         horizon: 4.0,
         step: 0.02,
         random_planners: 2,
-        tracker,
+        control_law,
         ..VerifyOptions::default()
     };
     let selection =
         Selection { adversaries: std::slice::from_ref(solution), grid_tolerance: 0.1, ..bare_selection(&beta_u) };
-    let run = |tracker| {
+    let run = |control_law| {
         verify_rows(
             &evaluator,
             &bundle.manifest,
             system,
             &selection,
             Shard::WHOLE,
-            &options(tracker),
+            &options(control_law),
             &ProgressBar::hidden(),
         )
         .unwrap()
         .remove(0)
     };
-    let (weak, reference) = (run(Tracker::Model), run(Tracker::Grid));
+    let (weak, reference) = (run(ControlLaw::Model), run(ControlLaw::Grid));
     // The independent reference: the largest grid value over the weak model's set {V <= level}, scanned on
     // its fit's nodes. From any state the grid's policy keeps the error within about the grid's value there.
     let grid = weak_grid(system);
@@ -448,11 +448,11 @@ fn the_grid_policy_as_the_tracker_holds_the_weak_models_samples_within_the_grid_
         system,
         &bare,
         Shard::WHOLE,
-        &options(Tracker::Grid),
+        &options(ControlLaw::Grid),
         &ProgressBar::hidden(),
     );
     assert!(
-        matches!(&refused, Err(VerifyError::Setting(m)) if m.contains("grid tracker")),
+        matches!(&refused, Err(VerifyError::Setting(m)) if m.contains("grid control law")),
         "{:?}",
         refused.map(|r| r.len())
     );

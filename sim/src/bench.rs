@@ -1,10 +1,10 @@
-//! The benchmark of the paper's Table 1: every method through the same seeded worlds, summarised per
+//! The benchmark of the paper's MarkdownTable 1: every method through the same seeded worlds, summarised per
 //! method (reached, collisions, bounds exceeded, time to goal, clearance, replans, resets, held steps, ticks,
 //! decision latency), beside the paper's figures. A benchmark may be split into shards of worlds (`--shard`), each
 //! writing a [`BenchPart`]; merged, the parts give the runs a single process gives.
 
 use crate::episode::{Outcome, Run};
-use fastrack_valuefn::record::Table;
+use fastrack_valuefn::record::MarkdownTable;
 use fastrack_valuefn::shard::Part;
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
@@ -44,7 +44,7 @@ pub const PART_STEM: &str = "sim-bench";
 /// What one shard of a benchmark ran.
 pub type BenchPart = Part<BenchRun>;
 
-/// The paper's Table 1 (20 runs): reached %, collision %, solution time (s), by method label.
+/// The paper's MarkdownTable 1 (20 runs): reached %, collision %, solution time (s), by method label.
 pub const PAPER_TABLE: [(&str, f64, f64, f64); 4] = [
     ("F(beta_l)", 100.0, 0.0, 37.31),
     ("MF", 100.0, 0.0, 30.11),
@@ -132,8 +132,8 @@ fn percent(part: usize, whole: usize) -> f64 {
 }
 
 /// The summaries as a markdown table.
-pub fn table(summaries: &[Summary]) -> Table {
-    let mut table = Table::new(&[
+pub fn table(summaries: &[Summary]) -> MarkdownTable {
+    let mut table = MarkdownTable::new(&[
         "method",
         "runs",
         "reached %",
@@ -174,10 +174,17 @@ pub fn table(summaries: &[Summary]) -> Table {
     table
 }
 
-/// The paper's Table 1 beside ours: reached %, collision % and time to goal per method.
-pub fn paper_comparison(summaries: &[Summary]) -> Table {
-    let mut table =
-        Table::new(&["method", "paper: reached %", "ours", "paper: collision %", "ours", "paper: time (s)", "ours"]);
+/// The paper's MarkdownTable 1 beside ours: reached %, collision % and time to goal per method.
+pub fn paper_comparison(summaries: &[Summary]) -> MarkdownTable {
+    let mut table = MarkdownTable::new(&[
+        "method",
+        "paper: reached %",
+        "ours",
+        "paper: collision %",
+        "ours",
+        "paper: time (s)",
+        "ours",
+    ]);
     for s in summaries {
         let paper = PAPER_TABLE.iter().find(|p| p.0 == s.method);
         let cell = |f: fn(&(&str, f64, f64, f64)) -> f64, digits: usize| {

@@ -10,7 +10,7 @@ use fastrack_client::{model_ref, pb};
 use fastrack_e2e::{write_network_bundle, TestServer, TEST_HORIZON};
 use fastrack_valuefn::network::{NetworkShape, ValueNetwork};
 use fastrack_valuefn::onnx_writer::write_value_graph;
-use fastrack_valuefn::record::{write_record, Table};
+use fastrack_valuefn::record::{write_record, MarkdownTable};
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
 use fastrack_valuefn::system::dubins4d;
 use ort::session::builder::GraphOptimizationLevel;
@@ -67,7 +67,7 @@ fn main() -> anyhow::Result<()> {
 
     // Throughput: interleaved rounds, median of each.
     let mut throughput =
-        Table::new(&["batch", "evaluator (evals/s)", "bare ort session (evals/s)", "evaluator / bare"]);
+        MarkdownTable::new(&["batch", "evaluator (evals/s)", "bare ort session (evals/s)", "evaluator / bare"]);
     let mut throughput_json = Vec::new();
     for n in BATCHES {
         let (s, p) = inputs(n);
@@ -140,7 +140,7 @@ fn main() -> anyhow::Result<()> {
             }
             anyhow::Ok(rows)
         })?;
-    let mut latency = Table::new(&["batch", "calls", "p50 (us)", "p99 (us)"]);
+    let mut latency = MarkdownTable::new(&["batch", "calls", "p50 (us)", "p99 (us)"]);
     let mut latency_json = Vec::new();
     for (n, calls, p50, p99) in &latency_rows {
         println!("TrackingControl batch {n:>3}: p50 {p50:.0} us, p99 {p99:.0} us ({calls} calls, concurrency 1)");

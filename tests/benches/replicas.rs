@@ -10,7 +10,7 @@
 use fastrack_cli::load_generator::{run_load, LoadSpec, Workload};
 use fastrack_client::{model_ref, ClientOptions, FastrackClient};
 use fastrack_e2e::{robot_tick, TestServer};
-use fastrack_valuefn::record::{write_record, Table};
+use fastrack_valuefn::record::{write_record, MarkdownTable};
 use serde_json::json;
 use std::path::Path;
 use std::sync::{Arc, Mutex};
@@ -107,7 +107,7 @@ fn main() -> anyhow::Result<()> {
         println!("{count} replica(s): {rate:.0} ticks/s");
         rates.push(rate);
     }
-    let mut table = Table::new(&["replicas", "ticks/s", "ticks/s per replica", "per-replica efficiency"]);
+    let mut table = MarkdownTable::new(&["replicas", "ticks/s", "ticks/s per replica", "per-replica efficiency"]);
     for (i, rate) in rates.iter().enumerate() {
         let n = (i + 1) as f64;
         table.row(vec![
@@ -119,7 +119,7 @@ fn main() -> anyhow::Result<()> {
     }
     let mut trials = Vec::new();
     let mut failover_table =
-        Table::new(&["trial", "robots on the killed replica", "served again: median (ms)", "slowest (ms)"]);
+        MarkdownTable::new(&["trial", "robots on the killed replica", "served again: median (ms)", "slowest (ms)"]);
     for trial in 1..=TRIALS {
         let (moved, mut recoveries) = rt.block_on(failover())?;
         recoveries.sort();

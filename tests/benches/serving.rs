@@ -12,7 +12,7 @@ use fastrack_cli::load_generator::{
 };
 use fastrack_client::{model_ref, ClientOptions};
 use fastrack_e2e::TestServer;
-use fastrack_valuefn::record::{write_record, Table};
+use fastrack_valuefn::record::{write_record, MarkdownTable};
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::time::Duration;
@@ -128,7 +128,7 @@ fn main() -> anyhow::Result<()> {
         ceilings.iter().find(|c| c.batch == workload.items_per_request()).map(InProcessReport::items_per_s)
     };
 
-    let mut table = Table::new(&[
+    let mut table = MarkdownTable::new(&[
         "dynamic batching",
         "workload",
         "concurrency",
@@ -160,7 +160,7 @@ fn main() -> anyhow::Result<()> {
         cell["vs_in_process"] = json!(ratio);
         cells_json.push(cell);
     }
-    let mut ceiling_table = Table::new(&["batch", "threads", "evaluations/s", "items/s"]);
+    let mut ceiling_table = MarkdownTable::new(&["batch", "threads", "evaluations/s", "items/s"]);
     for c in &ceilings {
         ceiling_table.row(vec![
             c.batch.to_string(),

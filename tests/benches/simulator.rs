@@ -12,7 +12,7 @@ use fastrack_sim::episode::{Run, RunSettings, Simulator};
 use fastrack_sim::in_process::LocalModel;
 use fastrack_sim::methods::Method;
 use fastrack_sim::world::{World, WorldSpec};
-use fastrack_valuefn::record::{write_record, Table};
+use fastrack_valuefn::record::{write_record, MarkdownTable};
 use serde_json::json;
 use std::path::Path;
 use std::time::Instant;
@@ -63,7 +63,7 @@ fn main() -> anyhow::Result<()> {
         }
         anyhow::Ok((rows, figures))
     })?;
-    let mut table = Table::new(&[
+    let mut table = MarkdownTable::new(&[
         "method",
         "control periods",
         "periods/s over gRPC",

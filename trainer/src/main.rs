@@ -334,7 +334,7 @@ fn run_bench(config_path: &std::path::Path, out: &std::path::Path, record: &str)
     use fastrack_trainer::step_bench::{
         flops_per_iteration, iterations_per_second, matmul_gflops, torch_iterations_per_second, Case,
     };
-    use fastrack_valuefn::record::{write_record, Table};
+    use fastrack_valuefn::record::{write_record, MarkdownTable};
     let device = burn::tensor::Device::flex().autodiff();
     let encoding = config.network.periodic_encoding;
     let n_in = FeatureLayout::for_system(&config.system()?, encoding).n_features();
@@ -347,7 +347,7 @@ fn run_bench(config_path: &std::path::Path, out: &std::path::Path, record: &str)
         iterations: 100,
     };
     let paper = Case { width: 512, depth: 3, points: 65_536, iterations: 3 };
-    let mut table = Table::new(&[
+    let mut table = MarkdownTable::new(&[
         "network x points",
         "burn-flex it/s",
         "GFLOP/iter",

@@ -7,14 +7,14 @@ use std::path::{Path, PathBuf};
 
 /// A markdown table.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Table {
+pub struct MarkdownTable {
     /// Column headers.
     pub header: Vec<String>,
     /// Rows of cells.
     pub rows: Vec<Vec<String>>,
 }
 
-impl Table {
+impl MarkdownTable {
     /// A table with these headers.
     pub fn new(header: &[&str]) -> Self {
         Self { header: header.iter().map(|s| s.to_string()).collect(), rows: Vec::new() }
@@ -49,7 +49,7 @@ pub fn write_record(
     command: &str,
     config: Value,
     figures: Value,
-    tables: &[(&str, &Table)],
+    tables: &[(&str, &MarkdownTable)],
 ) -> std::io::Result<PathBuf> {
     std::fs::create_dir_all(dir)?;
     let (machine, date, revision) = (machine_description(), utc_now_rfc3339(), source_revision());

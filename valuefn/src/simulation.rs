@@ -44,7 +44,7 @@ pub fn step_relative(system: &AffineSystem, r: &mut [f64], inputs: HeldInputs<'_
 
 /// How a simulated planner picks its input.
 #[derive(Debug, Clone, PartialEq)]
-pub enum Planner {
+pub enum PlannerPolicy {
     /// The maximiser of `grad . G_p u_p` over the planner's box, from the value's gradient.
     WorstCase,
     /// A random vertex of the planner's box, switched at exponentially distributed times.
@@ -63,10 +63,10 @@ pub enum Planner {
     },
 }
 
-impl Planner {
+impl PlannerPolicy {
     /// A bang-bang planner that draws its first vertex at the first step.
     pub fn bang_bang() -> Self {
-        Planner::BangBang { input: Vec::new(), next_switch: 0.0 }
+        PlannerPolicy::BangBang { input: Vec::new(), next_switch: 0.0 }
     }
 
     /// The input at time `t` for the value gradient `grad` at parameters `params`; a bang-bang planner
@@ -81,15 +81,15 @@ impl Planner {
         rng: &mut StdRng,
     ) -> Vec<f64> {
         match self {
-            Planner::WorstCase => system.worst_planner(grad, params),
-            Planner::BangBang { input, next_switch } => {
+            PlannerPolicy::WorstCase => system.worst_planner(grad, params),
+            PlannerPolicy::BangBang { input, next_switch } => {
                 if t >= *next_switch {
                     *input = random_vertex(system, params, rng);
                     *next_switch = t + exponential(mean_dwell, rng);
                 }
                 input.clone()
             }
-            Planner::Schedule { inputs, segment } => {
+            PlannerPolicy::Schedule { inputs, segment } => {
                 let k = ((t / *segment).floor().max(0.0) as usize).min(inputs.len().saturating_sub(1));
                 inputs.get(k).cloned().unwrap_or_else(|| vec![0.0; system.planner_input_param.len()])
             }
@@ -141,7 +141,7 @@ mod tests {
         let system = double_integrator::system();
         let mut rng = StdRng::seed_from_u64(3);
         let grad = [0.7, -0.2];
-        let worst = Planner::WorstCase.input(&system, &[0.8], &grad, 0.0, 1.0, &mut rng);
+        let worst = PlannerPolicy::WorstCase.input(&system, &[0.8], &grad, 0.0, 1.0, &mut rng);
         let g = &system.g_planner;
         let dot = |u: &[f64]| -> f64 {
             (0..g.nrows()).map(|i| grad[i] * (0..g.ncols()).map(|j| g[(i, j)] * u[j]).sum::<f64>()).sum()
@@ -149,7 +149,7 @@ mod tests {
         for vertex in [[0.8], [-0.8]] {
             assert!(dot(&worst) >= dot(&vertex) - 1e-12, "{worst:?} does not maximise over {vertex:?}");
         }
-        let mut bang = Planner::bang_bang();
+        let mut bang = PlannerPolicy::bang_bang();
         let mut switches = 0;
         let mut last = Vec::new();
         for k in 0..1000 {
@@ -166,7 +166,7 @@ mod tests {
     fn a_schedule_holds_each_input_for_its_segment_and_the_last_past_the_end() {
         let system = double_integrator::system();
         let mut rng = StdRng::seed_from_u64(3);
-        let mut schedule = Planner::Schedule { inputs: vec![vec![0.8], vec![-0.8], vec![0.3]], segment: 0.5 };
+        let mut schedule = PlannerPolicy::Schedule { inputs: vec![vec![0.8], vec![-0.8], vec![0.3]], segment: 0.5 };
         let mut at = |t: f64| schedule.input(&system, &[0.8], &[0.0, 0.0], t, 1.0, &mut rng)[0];
         assert_eq!([at(0.0), at(0.49), at(0.5), at(0.99), at(1.0), at(7.0)], [0.8, 0.8, -0.8, -0.8, 0.3, 0.3]);
     }

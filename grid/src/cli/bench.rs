@@ -8,7 +8,7 @@ use fastrack_grid::integrate::{step, RkOrder, Workspace};
 use fastrack_grid::scheme::Flux;
 use fastrack_grid::solver::SolveFields;
 use fastrack_grid::upwind::Accuracy;
-use fastrack_valuefn::record::{write_record, Table};
+use fastrack_valuefn::record::{write_record, MarkdownTable};
 use fastrack_valuefn::system::dubins4d;
 use serde_json::{json, Value};
 use std::path::PathBuf;
@@ -108,7 +108,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let cores = std::thread::available_parallelism().map_or(1, |n| n.get());
     let ours_rate = median(ours_rates.clone());
-    let mut table = Table::new(&["solver", "grid", "point updates/s", "per core", "ratio to hj_reachability"]);
+    let mut table = MarkdownTable::new(&["solver", "grid", "point updates/s", "per core", "ratio to hj_reachability"]);
     let grid_label = format!("{0}x{0}x{0}x{0}", args.resolution);
     let hj_rate = (!hj_rates.is_empty()).then(|| median(hj_rates.clone()));
     let ratio = hj_rate.map(|h| ours_rate / h);

@@ -3,7 +3,7 @@
 //! axes' solutions (`--axis-solutions`).
 
 use super::common::{axes_at, command_line, load_axis_solutions, SolveOptions, StudyOutputs};
-use super::table::solve_or_load;
+use super::teb_table::solve_or_load;
 use anyhow::{bail, Context};
 use fastrack_grid::compare::{
     combined_on_axis, compare, learned_on_axis, learned_on_grid, slices, Comparison, Learned, Slices,
@@ -12,7 +12,7 @@ use fastrack_grid::slice_plot::slice_pair;
 use fastrack_grid::solver::Solution;
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::manifest::Manifest;
-use fastrack_valuefn::record::{write_record, Table};
+use fastrack_valuefn::record::{write_record, MarkdownTable};
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
 use fastrack_valuefn::system::{by_id, decomposition, AffineSystem, DecomposedAxis};
 use serde_json::json;
@@ -131,7 +131,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(axes) = decomposition(&manifest.system.id) {
         return run_axes(&args, &bundle, &evaluator, &axes, &name);
     }
-    let mut table = Table::new(&[&["beta"][..], &COLUMNS].concat());
+    let mut table = MarkdownTable::new(&[&["beta"][..], &COLUMNS].concat());
     let mut rows = Vec::new();
     for &beta in &args.betas {
         let solution = solve_or_load(&system, &solve, beta, &args.outputs.solutions_dir)?;
@@ -177,7 +177,7 @@ fn run_axes(
     }
     let system = by_id(id).with_context(|| format!("unknown system `{id}`"))?;
     let (solutions, betas) = load_axis_solutions(id, axes, &args.axis_solutions)?;
-    let mut table = Table::new(&[&["beta", "axis"][..], &COLUMNS].concat());
+    let mut table = MarkdownTable::new(&[&["beta", "axis"][..], &COLUMNS].concat());
     let mut rows = Vec::new();
     for beta in betas {
         let pairs = axes_at(id, axes, &solutions, beta)?;

@@ -4,11 +4,11 @@
 //! step); plots and a measurement record.
 
 use super::common::{command_line, SolveOptions, StudyOutputs};
-use super::table::solve_or_load;
+use super::teb_table::solve_or_load;
 use fastrack_grid::analysis::{teb, EXTENT_REL_TOL};
 use fastrack_grid::solver::{ConvergenceSet, HistoryPoint, Solution, WindowRates};
 use fastrack_valuefn::plot::{line_chart, Chart, Series};
-use fastrack_valuefn::record::{write_record, Table};
+use fastrack_valuefn::record::{write_record, MarkdownTable};
 use serde_json::json;
 
 /// Arguments of `horizon`.
@@ -173,8 +173,8 @@ fn write_outputs(args: &Args, set: ConvergenceSet, studies: &[Study], name: &str
     let mut header: Vec<String> = vec!["grid".into(), "beta".into()];
     header.extend(args.at.iter().map(|t| format!("V_min({t} s)")));
     header.extend(["dV_min/dtau, last 5 s".into(), "wall (s)".into()]);
-    let mut vmin_table = Table::new(&header.iter().map(String::as_str).collect::<Vec<_>>());
-    let mut rate_table = Table::new(&[
+    let mut vmin_table = MarkdownTable::new(&header.iter().map(String::as_str).collect::<Vec<_>>());
+    let mut rate_table = MarkdownTable::new(&[
         "grid",
         "beta",
         "tau (s)",
@@ -188,7 +188,7 @@ fn write_outputs(args: &Args, set: ConvergenceSet, studies: &[Study], name: &str
         "over it: grid",
         "set",
     ]);
-    let mut settled_table = Table::new(&[
+    let mut settled_table = MarkdownTable::new(&[
         "grid",
         "beta",
         "set rate settled (s)",

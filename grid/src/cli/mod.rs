@@ -6,7 +6,7 @@ mod compare;
 mod horizon;
 mod rollout;
 mod solve;
-mod table;
+mod teb_table;
 mod verify;
 mod verify_bench;
 
@@ -30,7 +30,7 @@ enum Command {
     Solve(solve::Args),
     /// TEB table over beta (classic FaSTrack bound at beta_u, Meta-FaSTrack levels) across resolutions and
     /// accuracies, with V_min-vs-horizon and V_min-vs-resolution plots and a record under bench/results/.
-    Table(table::Args),
+    TebTable(teb_table::Args),
     /// V_min and max |dV/dtau| by region (grid, interior, sublevel set) against the horizon, across resolutions
     /// and beta, with the horizon at which the sublevel-set rate settles; plots and a record.
     Horizon(horizon::Args),
@@ -58,7 +58,7 @@ enum Command {
 pub fn run(cli: Cli) -> anyhow::Result<()> {
     match cli.command {
         Command::Solve(args) => solve::run(args),
-        Command::Table(args) => table::run(args),
+        Command::TebTable(args) => teb_table::run(args),
         Command::Horizon(args) => horizon::run(args),
         Command::Compare(args) => compare::run(args),
         Command::Verify(args) => verify::run(args),

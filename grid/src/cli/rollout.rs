@@ -8,7 +8,7 @@ use fastrack_grid::format::load;
 use fastrack_grid::rollout::{roll_out_axes, roll_out_solution, AxesRolloutReport, RolloutOptions, RolloutReport};
 use fastrack_grid::solver::Solution;
 use fastrack_valuefn::plot::{line_chart, Chart, Series};
-use fastrack_valuefn::record::{write_record, Table};
+use fastrack_valuefn::record::{write_record, MarkdownTable};
 use fastrack_valuefn::system::{by_id, decomposition};
 use serde_json::json;
 use std::path::PathBuf;
@@ -119,7 +119,7 @@ fn write_outputs(
     results: &[(PathBuf, Solution, RolloutReport)],
     name: &str,
 ) -> anyhow::Result<()> {
-    let mut table = Table::new(&[
+    let mut table = MarkdownTable::new(&[
         "solution",
         "solved to (s)",
         "V_min",
@@ -197,7 +197,7 @@ fn run_axes(args: &Args, options: &RolloutOptions, id: &str) -> anyhow::Result<(
     let system = by_id(id).with_context(|| format!("unknown system `{id}`"))?;
     let axes = decomposition(id).with_context(|| format!("`{id}` has no decomposition into axes"))?;
     let (solutions, betas) = load_axis_solutions(id, &axes, &args.solutions)?;
-    let mut table = Table::new(&[
+    let mut table = MarkdownTable::new(&[
         "beta",
         "axis V_min",
         "combined bound",

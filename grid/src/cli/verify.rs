@@ -6,12 +6,12 @@ use anyhow::Context;
 use fastrack_grid::format;
 use fastrack_grid::solver::Solution;
 use fastrack_grid::verify::{
-    apply_reports, required_samples, verify_rows, Batching, Correction, FalsificationOptions, RecordedStates,
-    RowReport, SearchOptions, Selection, Tracker, VerifyOptions,
+    apply_reports, required_samples, verify_rows, Batching, ControlLaw, Correction, FalsificationOptions,
+    RecordedStates, RowReport, SearchOptions, Selection, VerifyOptions,
 };
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::manifest::{Manifest, TebRow};
-use fastrack_valuefn::record::{write_record, Table};
+use fastrack_valuefn::record::{write_record, MarkdownTable};
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
 use fastrack_valuefn::shard::{Part, Shard};
 use fastrack_valuefn::system::{for_bundle, AffineSystem};
@@ -31,14 +31,14 @@ pub struct Args {
     #[arg(long)]
     bundle: PathBuf,
     /// Repository root the verified bundle is written into (`<out>/<name>/<version>/`); may be the
-    /// bundle's own repository to update it in place. Not with `--tracker grid`, which writes only a record.
-    #[arg(long, required_unless_present_any = ["part_dir", "tracker"])]
+    /// bundle's own repository to update it in place. Not with `--control-law grid`, which writes only a record.
+    #[arg(long, required_unless_present_any = ["part_dir", "control_law"])]
     out: Option<PathBuf>,
-    /// Whose control the tracker plays: `model` (the bundle's served control, what is verified) or `grid`
+    /// Whose control law the tracker plays: `model` (the bundle's served control, what is verified) or `grid`
     /// (the policy of the row's grid solution from --grid-solutions, on the bundle's own sampled sets: a
     /// reference for what the learned control loses; writes a record, never a bundle).
     #[arg(long, value_enum)]
-    tracker: Option<Tracker>,
+    control_law: Option<ControlLaw>,
     /// Violation-probability bound epsilon.
     #[arg(long, default_value_t = 1e-3)]
     eps: f64,
@@ -250,13 +250,13 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         shard.is_whole() || args.part_dir.is_some(),
         "--shard {shard} writes a part: give --part-dir (merge the parts with `fastrack-grid verify-merge`)"
     );
-    let tracker = args.tracker.unwrap_or_default();
+    let control_law = args.control_law.unwrap_or_default();
     anyhow::ensure!(
-        tracker == Tracker::Model || args.out.is_none(),
-        "--tracker grid verifies no bundle: it writes only a record, so --out does not apply"
+        control_law == ControlLaw::Model || args.out.is_none(),
+        "--control-law grid verifies no bundle: it writes only a record, so --out does not apply"
     );
     anyhow::ensure!(
-        tracker == Tracker::Grid || args.out.is_some() || args.part_dir.is_some(),
+        control_law == ControlLaw::Grid || args.out.is_some() || args.part_dir.is_some(),
         "give --out, the repository the verified bundle is written into"
     );
     let Loaded { bundle, system, evaluator } = load(&args.bundle, args.ort_lib.as_deref())?;
@@ -291,7 +291,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         },
         batch: args.batch,
         batching: Batching { chunk: args.chunk, parallel: !args.sequential },
-        tracker,
+        control_law,
         seed: args.seed,
     };
     let adversaries: Vec<Solution> = args
@@ -354,8 +354,8 @@ pub fn merge(args: MergeArgs) -> anyhow::Result<()> {
         args.bundle.display()
     );
     anyhow::ensure!(
-        merged.config["options"]["tracker"] != json!(Tracker::Grid),
-        "the parts played the grid's policy as the tracker (--tracker grid): they verify no bundle"
+        merged.config["options"]["control_law"] != json!(ControlLaw::Grid),
+        "the parts played the grid's policy as the tracker (--control-law grid): they verify no bundle"
     );
     let mut reports = merged.items;
     let position = |beta: f64| bundle.manifest.teb_table.iter().position(|row| row.beta == beta);
@@ -385,7 +385,7 @@ fn finish(
 ) -> anyhow::Result<()> {
     let mut manifest: Manifest = bundle.manifest.clone();
     let applied = apply_reports(evaluator, &mut manifest, system, &reports);
-    let mut table = Table::new(&[
+    let mut table = MarkdownTable::new(&[
         "beta",
         "learned level",
         "rounds",

@@ -6,7 +6,7 @@ use super::common::command_line;
 use anyhow::Context;
 use fastrack_grid::verify::{required_samples, rollout_rate, Batching, RateProbe};
 use fastrack_valuefn::bundle::Bundle;
-use fastrack_valuefn::record::{write_record, Table};
+use fastrack_valuefn::record::{write_record, MarkdownTable};
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
 use fastrack_valuefn::system::for_bundle;
 use serde_json::json;
@@ -82,8 +82,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         rates.push((name, states, batching, rate));
     }
     let baseline = rates[0].3;
-    let mut table =
-        Table::new(&["feeding", "rollouts", "states per call", "threads", "rollout steps/s", "vs one per call"]);
+    let mut table = MarkdownTable::new(&[
+        "feeding",
+        "rollouts",
+        "states per call",
+        "threads",
+        "rollout steps/s",
+        "vs one per call",
+    ]);
     for (name, states, batching, rate) in &rates {
         table.row(vec![
             name.to_string(),
@@ -97,7 +103,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let n = required_samples(args.eps, args.delta);
     let row_steps = (n * args.rollouts_per_sample) as f64 * (args.horizon / args.step).round();
     let rows = manifest.teb_table.len();
-    let mut projection = Table::new(&["feeding", "row (s)", "table (s)", "table (h)"]);
+    let mut projection = MarkdownTable::new(&["feeding", "row (s)", "table (s)", "table (h)"]);
     for (name, _, _, rate) in &rates {
         let row = row_steps / rate;
         projection.row(vec![

@@ -6,7 +6,7 @@
 use super::VerifyError;
 use crate::solver::Solution;
 use fastrack_valuefn::runtime::Evaluator;
-use fastrack_valuefn::simulation::{step_relative, HeldInputs, Planner};
+use fastrack_valuefn::simulation::{step_relative, HeldInputs, PlannerPolicy};
 use fastrack_valuefn::system::AffineSystem;
 use rand::rngs::StdRng;
 use rayon::prelude::*;
@@ -25,7 +25,7 @@ pub(super) struct Rollout {
     /// Relative state.
     pub state: Vec<f64>,
     /// The planner pushing it.
-    pub planner: Planner,
+    pub planner: PlannerPolicy,
     /// The gradient the planner reads.
     pub gradient: Gradient,
     /// The planner's own random generator.
@@ -36,7 +36,7 @@ pub(super) struct Rollout {
 
 impl Rollout {
     /// A rollout from `state` with its error at the start as the largest so far.
-    pub fn new(system: &AffineSystem, state: &[f64], planner: Planner, gradient: Gradient, rng: StdRng) -> Self {
+    pub fn new(system: &AffineSystem, state: &[f64], planner: PlannerPolicy, gradient: Gradient, rng: StdRng) -> Self {
         Self { state: state.to_vec(), planner, gradient, rng, max_error: system.tracking_error(state) }
     }
 }

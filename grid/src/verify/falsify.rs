@@ -7,7 +7,7 @@
 
 use super::batch::{Gradient, Rollout, Scene};
 use super::VerifyError;
-use fastrack_valuefn::simulation::Planner;
+use fastrack_valuefn::simulation::PlannerPolicy;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
@@ -101,7 +101,7 @@ pub(super) fn falsify(
         for (_, state) in &inside {
             for &gradient in &families {
                 let seed = StdRng::seed_from_u64(rng.random());
-                rollouts.push(Rollout::new(system, state, Planner::WorstCase, gradient, seed));
+                rollouts.push(Rollout::new(system, state, PlannerPolicy::WorstCase, gradient, seed));
             }
         }
         scene.roll_out(&mut rollouts)?;

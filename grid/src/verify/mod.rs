@@ -42,7 +42,7 @@ use batch::{Gradient, Rollout, Scene};
 use fastrack_valuefn::manifest::{CheckResult, Manifest, PlannerResult, TebRow, Verification};
 use fastrack_valuefn::runtime::{Evaluator, RuntimeError};
 use fastrack_valuefn::shard::Shard;
-use fastrack_valuefn::simulation::Planner;
+use fastrack_valuefn::simulation::PlannerPolicy;
 use fastrack_valuefn::system::AffineSystem;
 use fastrack_valuefn::teb::{reshape_at_set_levels, TebOptions};
 use indicatif::ProgressBar;
@@ -78,10 +78,10 @@ impl Correction {
     }
 }
 
-/// Whose control the tracker plays in the rollouts.
+/// Whose control law the tracker plays in the rollouts.
 #[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
 #[serde(rename_all = "kebab-case")]
-pub enum Tracker {
+pub enum ControlLaw {
     /// The bundle's served control: what verification certifies.
     #[default]
     Model,
@@ -136,9 +136,9 @@ pub struct VerifyOptions {
     /// box (measured on a pilot of proposals), so that a narrow minimum can be sampled; 0 keeps
     /// `(1 + level_margin) level`.
     pub min_acceptance: f64,
-    /// Whose control the tracker plays.
+    /// Whose control law the tracker plays.
     #[serde(default)]
-    pub tracker: Tracker,
+    pub control_law: ControlLaw,
     /// Random seed.
     pub seed: u64,
 }
@@ -164,7 +164,7 @@ impl Default for VerifyOptions {
             proposal_box: 2.5,
             max_proposals: 20_000_000,
             min_acceptance: 5e-3,
-            tracker: Tracker::Model,
+            control_law: ControlLaw::Model,
             seed: 11,
         }
     }
@@ -551,9 +551,9 @@ fn run_samples(
         for state in samples.chunks(n_state) {
             for &family in &families {
                 let (planner, gradient) = match family {
-                    Family::GridWorstCase => (Planner::WorstCase, Gradient::Grid),
-                    Family::RandomBangBang => (Planner::bang_bang(), Gradient::Model),
-                    _ => (Planner::WorstCase, Gradient::Model),
+                    Family::GridWorstCase => (PlannerPolicy::WorstCase, Gradient::Grid),
+                    Family::RandomBangBang => (PlannerPolicy::bang_bang(), Gradient::Model),
+                    _ => (PlannerPolicy::WorstCase, Gradient::Model),
                 };
                 rollouts.push(Rollout::new(system, state, planner, gradient, StdRng::seed_from_u64(rng.random())));
             }
@@ -624,9 +624,9 @@ pub fn verify_row(
             return Err(VerifyError::System { bundle: g.info.system.clone(), system: system.id.into() });
         }
     }
-    if options.tracker == Tracker::Grid && grid.is_none() {
+    if options.control_law == ControlLaw::Grid && grid.is_none() {
         return Err(VerifyError::Setting(format!(
-            "row beta {}: the grid tracker plays a grid solution's policy, and none lies within the grid tolerance of this beta",
+            "row beta {}: the grid control law is a grid solution's policy, and none lies within the grid tolerance of this beta",
             row.beta
         )));
     }
@@ -639,9 +639,9 @@ pub fn verify_row(
         system,
         params: &params,
         grid,
-        tracker: match options.tracker {
-            Tracker::Model => Gradient::Model,
-            Tracker::Grid => Gradient::Grid,
+        tracker: match options.control_law {
+            ControlLaw::Model => Gradient::Model,
+            ControlLaw::Grid => Gradient::Grid,
         },
         horizon: options.horizon,
         step: options.step,
@@ -855,7 +855,7 @@ pub fn rollout_rate(
     let mut rollouts: Vec<Rollout> = (0..probe.states)
         .map(|_| {
             let state: Vec<f64> = manifest.state.iter().map(|d| rng.random_range(d.min..=d.max)).collect();
-            Rollout::new(system, &state, Planner::WorstCase, Gradient::Model, StdRng::seed_from_u64(0))
+            Rollout::new(system, &state, PlannerPolicy::WorstCase, Gradient::Model, StdRng::seed_from_u64(0))
         })
         .collect();
     let scene = Scene {

@@ -7,7 +7,7 @@
 
 use super::batch::{Gradient, Rollout, Scene};
 use super::VerifyError;
-use fastrack_valuefn::simulation::Planner;
+use fastrack_valuefn::simulation::PlannerPolicy;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
@@ -89,7 +89,7 @@ pub(super) fn search(
                     .chunks(axes)
                     .map(|seg| seg.iter().zip(&bounds).map(|(&plus, &b)| if plus { b } else { -b }).collect())
                     .collect();
-                let planner = Planner::Schedule { inputs, segment: options.segment };
+                let planner = PlannerPolicy::Schedule { inputs, segment: options.segment };
                 rollouts.push(Rollout::new(system, start, planner, Gradient::Model, StdRng::seed_from_u64(0)));
                 signs.push(s);
             }

@@ -1,4 +1,4 @@
-//! `table`: TEB over `beta` (the classic FaSTrack bound at `beta_l`/`beta_u` and the Meta-FaSTrack levels),
+//! `teb-table`: the grid's TEB table over `beta` (the classic FaSTrack bound at `beta_l`/`beta_u` and the Meta-FaSTrack levels),
 //! across resolutions and accuracies, with convergence plots and a measurement record.
 
 use super::common::{command_line, params_for, SolveOptions, StudyOutputs};
@@ -9,12 +9,12 @@ use fastrack_grid::scheme::Flux;
 use fastrack_grid::solver::{solve, Solution};
 use fastrack_grid::upwind::Accuracy;
 use fastrack_valuefn::plot::{line_chart, Chart, Series};
-use fastrack_valuefn::record::{write_record, Table};
+use fastrack_valuefn::record::{write_record, MarkdownTable};
 use fastrack_valuefn::system::AffineSystem;
 use serde_json::json;
 use std::path::{Path, PathBuf};
 
-/// Arguments of `table`.
+/// Arguments of `teb-table`.
 #[derive(clap::Args)]
 pub struct Args {
     #[command(flatten)]
@@ -149,7 +149,7 @@ fn write_outputs(
     entries: &[Entry],
     name: &str,
 ) -> anyhow::Result<()> {
-    let mut all = Table::new(&[
+    let mut all = MarkdownTable::new(&[
         "accuracy",
         "grid",
         "beta",
@@ -183,7 +183,7 @@ fn write_outputs(
         let top = by_res.last().map(|e| e.solution.grid.num_points()).unwrap_or(0);
         by_res.into_iter().filter(|e| e.solution.grid.num_points() == top).collect()
     };
-    let mut teb_table = Table::new(&[
+    let mut teb_table = MarkdownTable::new(&[
         "beta",
         "V_min (Meta-FaSTrack level)",
         "classic FaSTrack bound (V_min at beta_u)",
