@@ -78,16 +78,48 @@ impl LoadedModel {
     }
 
     /// The result of `batch` from its graph outputs: each item's membership in the certified set of its row.
-    pub fn result(&self, outputs: Evaluation, batch: &ValidBatch) -> BatchResult {
+    /// An item whose value, gradient or control is not finite (a state so far outside the trained domain that
+    /// the graph overflows) fails the batch with OUT_OF_RANGE naming it: no number that is not one is sent.
+    pub fn result(&self, outputs: Evaluation, batch: &ValidBatch) -> Result<BatchResult, Status> {
+        let (ns, nc) = (self.space.n_state(), self.manifest.n_control());
+        let finite = |i: usize| {
+            outputs.value[i].is_finite()
+                && outputs.grad[i * ns..(i + 1) * ns].iter().all(|g| g.is_finite())
+                && outputs.control[i * nc..(i + 1) * nc].iter().all(|u| u.is_finite())
+        };
+        if let Some(i) = (0..batch.n).find(|&i| !finite(i)) {
+            return Err(self.not_finite(i, &batch.states[i * ns..(i + 1) * ns]));
+        }
         let in_teb = outputs.value.iter().zip(&batch.max_beta).map(|(&v, &b)| self.in_teb(v, b)).collect();
-        BatchResult { outputs, in_teb }
+        Ok(BatchResult { outputs, in_teb })
+    }
+
+    /// The error for item `i` (state `state`) whose outputs are not finite.
+    fn not_finite(&self, i: usize, state: &[f32]) -> Status {
+        let state: Vec<f64> = state.iter().map(|&x| f64::from(x)).collect();
+        match self.space.first_outside(&state) {
+            Some(j) => {
+                let d = &self.manifest.state[j];
+                Status::out_of_range(format!(
+                    "item {i} lies so far outside the trained domain ({} = {:e} in the model's 32-bit inputs, domain [{}, {}] {}) that its value is not a finite number; nothing is returned for it",
+                    d.name, state[j], d.min, d.max, d.unit
+                ))
+            }
+            None => {
+                tracing::error!(model = %self.label(), item = i, ?state, "a non-finite output inside the domain");
+                Status::internal(format!(
+                    "model {} gave a non-finite output for item {i} inside its domain",
+                    self.label()
+                ))
+            }
+        }
     }
 
     /// Evaluates a validated batch on the calling thread (blocks): what the compute pool answers, for a
     /// caller that holds the model in its own process.
     pub fn answer(&self, batch: &ValidBatch) -> Result<BatchResult, Status> {
         let outputs = self.compute(&batch.states, &batch.params)?;
-        Ok(self.result(outputs, batch))
+        self.result(outputs, batch)
     }
 
     /// Evaluates `[N x n_state]` states with `[N x n_params]` params; blocks (compute-pool threads only).

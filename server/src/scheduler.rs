@@ -201,7 +201,7 @@ impl Shared {
         let split = if group.len() == 1 { vec![outputs] } else { split(outputs, &group, &model) };
         for (job, outputs) in group.drain(..).zip(split) {
             let result = model.result(outputs, &job.batch);
-            let _ = job.reply.send(Ok((result, job.batch)));
+            let _ = job.reply.send(result.map(|result| (result, job.batch)));
         }
     }
 }

@@ -191,6 +191,24 @@ async fn bad_requests_get_their_status_and_a_precise_message() {
         Ok(mut stream) => expect_error(stream.recv().await, Code::NotFound, &["nope"]),
     }
 
+    // A finite state so far outside the domain that the model's 32-bit graph overflows: flagged batches and
+    // Track ticks alike are refused for it, never answered with a value or a control that is not a number.
+    let far = |x: f64| vec![x, 0.0, 0.0, 1.0, 0.1, 0.2, 0.3, 1.0];
+    for x in [1e300, -1e30] {
+        expect_error(
+            client.evaluate_value(good(), far(x), vec![1.0; 4], pb::OutOfDomainPolicy::Flag).await,
+            Code::OutOfRange,
+            &["item 0", "x_r", "not a finite number", "[-3, 3]"],
+        );
+    }
+    let mut stream = client.track(good(), 5.0).await.unwrap();
+    let tick =
+        pb::TrackTick { seq: 1, tracker_state: vec![1e300, 0.0, 0.0, 1.0], planner_state: vec![0.0, 0.0], d_obs: None };
+    let reply = stream.tick(tick).await.unwrap();
+    let error = reply.error.expect("the far tick is refused");
+    assert_eq!(Code::from_i32(error.code), Code::OutOfRange, "{}", error.message);
+    assert!(error.message.contains("not a finite number"), "{}", error.message);
+
     assert!(server.is_running(), "the server survived every bad request");
     assert!(evaluate(&client, ok_state, vec![1.0, 1.0]).await.is_ok());
 }
