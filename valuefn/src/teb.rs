@@ -217,7 +217,7 @@ pub fn reshape_at_set_levels(
 /// Uniform samples of a row's certified set behind its nested share.
 const NESTING_SAMPLES: usize = 2_000;
 /// Proposals per row before a set counts as too small to sample.
-const NESTING_PROPOSALS: usize = 2_000_000;
+const NESTING_PROPOSALS: usize = 1_000_000;
 /// Proposals per oracle call.
 const NESTING_CHUNK: usize = 8_192;
 
@@ -249,7 +249,7 @@ pub fn nested_shares(
                     }
                 })
                 .unzip();
-        let (mut inside, mut nested, mut proposed) = (Vec::new(), 0usize, 0usize);
+        let (mut inside, mut proposed) = (Vec::new(), 0usize);
         while inside.len() < NESTING_SAMPLES * n_state && proposed < NESTING_PROPOSALS {
             let states: Vec<f64> =
                 (0..NESTING_CHUNK * n_state).map(|k| rng.random_range(lo[k % n_state]..=hi[k % n_state])).collect();
@@ -266,7 +266,7 @@ pub fn nested_shares(
         if found >= NESTING_SAMPLES / 10 {
             let params = vec![next.beta; found * system.n_params()];
             let (values, _) = oracle.values_and_grads(&inside, &params)?;
-            nested += values.iter().filter(|&&v| v <= next.set_level()).count();
+            let nested = values.iter().filter(|&&v| v <= next.set_level()).count();
             shares[i] = Some(nested as f64 / found as f64);
         }
     }
