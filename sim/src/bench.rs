@@ -1,4 +1,4 @@
-//! The benchmark of the paper's MarkdownTable 1: every method through the same seeded worlds, summarised per
+//! The benchmark of the paper's Table 1: every method through the same seeded worlds, summarised per
 //! method (reached, collisions, bounds exceeded, time to goal, clearance, replans, resets, held steps, ticks,
 //! decision latency), beside the paper's figures. A benchmark may be split into shards of worlds (`--shard`), each
 //! writing a [`BenchPart`]; merged, the parts give the runs a single process gives.
@@ -44,7 +44,7 @@ pub const PART_STEM: &str = "sim-bench";
 /// What one shard of a benchmark ran.
 pub type BenchPart = Part<BenchRun>;
 
-/// The paper's MarkdownTable 1 (20 runs): reached %, collision %, solution time (s), by method label.
+/// The paper's Table 1 (20 runs): reached %, collision %, solution time (s), by method label.
 pub const PAPER_TABLE: [(&str, f64, f64, f64); 4] = [
     ("F(beta_l)", 100.0, 0.0, 37.31),
     ("MF", 100.0, 0.0, 30.11),
@@ -174,7 +174,7 @@ pub fn table(summaries: &[Summary]) -> MarkdownTable {
     table
 }
 
-/// The paper's MarkdownTable 1 beside ours: reached %, collision % and time to goal per method.
+/// The paper's Table 1 beside ours: reached %, collision % and time to goal per method.
 pub fn paper_comparison(summaries: &[Summary]) -> MarkdownTable {
     let mut table = MarkdownTable::new(&[
         "method",

@@ -1,5 +1,5 @@
 //! `fastrack sim`: the navigation simulator against the server: `run` (one world, one method, a summary and
-//! figures), `bench` (seeded worlds x methods, the paper's MarkdownTable 1, a record), `fleet` (many robots on one
+//! figures), `bench` (seeded worlds x methods, the paper's Table 1, a record), `fleet` (many robots on one
 //! server at once) and `world` (generate or check a world file).
 
 use super::{print, Server};
@@ -36,7 +36,7 @@ pub struct Args {
 enum SimCommand {
     /// One world, one method: prints the run's summary and writes its figures.
     Run(RunArgs),
-    /// Seeded worlds x methods: the paper's MarkdownTable 1 beside ours, a record and figures.
+    /// Seeded worlds x methods: the paper's Table 1 beside ours, a record and figures.
     Bench(BenchArgs),
     /// Merges the parts of a sharded `sim bench` into the tables and record a single run gives.
     Merge(MergeArgs),
@@ -517,7 +517,7 @@ fn report(
                    "pf_time_ratios": ratios.iter().map(|(l, r)| json!({"against": l, "ratio": r.map(|x| x.0), "worlds": r.map(|x| x.1)})).collect::<Vec<_>>(),
                    "paper_pf_over_f_ratio": 22.47 / 37.31, "wall_s": wall_s, "figure": figure,
                    "time_to_goal_figure": times_figure}),
-            &[("Ours", &ours), ("The paper's MarkdownTable 1 beside ours", &paper)],
+            &[("Ours", &ours), ("The paper's Table 1 beside ours", &paper)],
         )?;
         eprintln!("record: {}", path.display());
     }
