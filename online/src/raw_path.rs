@@ -67,6 +67,9 @@ impl Default for GridAStar {
     }
 }
 
+/// Most cells a side of the grid searched: cell indices and their neighbours stay far from overflow.
+const MAX_CELLS_PER_SIDE: f64 = 1_048_576.0;
+
 /// Grid costs are integers: micrometres.
 const COST_SCALE: f64 = 1e6;
 
@@ -82,8 +85,14 @@ impl RawPathPlanner for GridAStar {
             return Err(PlanError::GoalBlocked { goal: request.goal, inflation: request.inflation });
         }
         let no_path = || PlanError::NoPath { start: request.start, goal: request.goal, inflation: request.inflation };
-        let columns = ((hi[0] - lo[0]) / self.cell).ceil() as i64 + 1;
-        let rows = ((hi[1] - lo[1]) / self.cell).ceil() as i64 + 1;
+        let span = |axis: usize| ((hi[axis] - lo[axis]) / self.cell).ceil();
+        if !(0..2).all(|axis| span(axis) >= 0.0 && span(axis) <= MAX_CELLS_PER_SIDE) {
+            return Err(PlanError::Settings(format!(
+                "the bounds {lo:?}..{hi:?} span more than {MAX_CELLS_PER_SIDE} cells of {} m a side (or are not finite)",
+                self.cell
+            )));
+        }
+        let (columns, rows) = (span(0) as i64 + 1, span(1) as i64 + 1);
         let centre = |(i, j): (i64, i64)| [lo[0] + i as f64 * self.cell, lo[1] + j as f64 * self.cell];
         let cell_of =
             |p: Point| (((p[0] - lo[0]) / self.cell).round() as i64, ((p[1] - lo[1]) / self.cell).round() as i64);
@@ -232,5 +241,14 @@ mod tests {
         let on_goal = [Obstacle::Circle { center: [10.0, 0.2], radius: 0.5 }];
         assert!(matches!(GridAStar::default().plan(&request(&on_goal, 0.3)), Err(PlanError::GoalBlocked { .. })));
         assert!(matches!(GridAStar { cell: 0.0 }.plan(&request(&[], 0.3)), Err(PlanError::Settings(_))));
+    }
+
+    #[test]
+    fn bounds_past_the_grid_s_reach_are_refused_not_overflowed() {
+        for hi in [[1e300, 6.0], [f64::INFINITY, 6.0], [11.0, 2e5]] {
+            let far = PlanRequest { bounds: ([-1.0, -6.0], hi), ..request(&[], 0.3) };
+            let Err(PlanError::Settings(why)) = GridAStar::default().plan(&far) else { panic!("{hi:?} was planned") };
+            assert!(why.contains("cells of 0.1 m a side"), "{why}");
+        }
     }
 }

@@ -125,7 +125,7 @@ impl Repository {
 
     fn load_dir(&self, name: &str, version: u32, dir: &Path) -> LoadOutcome {
         let fingerprint = Fingerprint::of(dir);
-        let result = Bundle::load(dir).map_err(|e| e.to_string()).and_then(|bundle| {
+        let result = Bundle::load_within(&self.root, dir).map_err(|e| e.to_string()).and_then(|bundle| {
             if bundle.manifest.name != name || bundle.manifest.version != version {
                 return Err(format!(
                     "{}: the manifest says {}/{}, the folder {name}/{version}",

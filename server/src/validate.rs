@@ -108,7 +108,12 @@ pub fn batch(
     }
     Ok(ValidBatch {
         n,
-        states: states.iter().map(|&x| x as f32).collect(),
+        // Periodic coordinates wrapped in double precision first: an angle the graph's single precision
+        // cannot hold (1e300 rad, or one that loses its fraction) enters it as its residue.
+        states: states
+            .chunks(ns)
+            .flat_map(|item| item.iter().zip(&model.space.coordinates).map(|(&x, c)| c.wrapped(x) as f32))
+            .collect(),
         params: params.iter().map(|&x| x as f32).collect(),
         in_domain,
         max_beta,

@@ -91,6 +91,12 @@ pub enum WorldError {
     },
 }
 
+/// Longest side of a world's workspace (m): the planner searches a 0.1 m grid of it, at most 2,000 cells a
+/// side.
+pub const MAX_WORKSPACE_SIDE: f64 = 200.0;
+/// Most obstacles in a world: every planner step measures the clearance to each.
+pub const MAX_OBSTACLES: usize = 10_000;
+
 fn invalid<T>(field: impl Into<String>, problem: impl Into<String>) -> Result<T, WorldError> {
     Err(WorldError::Invalid { field: field.into(), problem: problem.into() })
 }
@@ -125,8 +131,9 @@ impl World {
         p[0] >= self.min[0] && p[0] <= self.max[0] && p[1] >= self.min[1] && p[1] <= self.max[1]
     }
 
-    /// Checks every value: finite numbers, a workspace with area, obstacles that exist, start and goal inside
-    /// the workspace and outside every obstacle.
+    /// Checks every value: finite numbers, a workspace with area and sides of at most
+    /// [`MAX_WORKSPACE_SIDE`], at most [`MAX_OBSTACLES`] obstacles that exist, start and goal inside the
+    /// workspace and outside every obstacle.
     pub fn validate(&self) -> Result<(), WorldError> {
         let finite = |p: &Point| p.iter().all(|x| x.is_finite());
         if !(finite(&self.min) && finite(&self.max) && self.min[0] < self.max[0] && self.min[1] < self.max[1]) {
@@ -134,6 +141,15 @@ impl World {
                 "min/max",
                 format!("the workspace {:?}..{:?} must be finite with min below max", self.min, self.max),
             );
+        }
+        if (0..2).any(|i| self.max[i] - self.min[i] > MAX_WORKSPACE_SIDE) {
+            return invalid(
+                "min/max",
+                format!("the workspace {:?}..{:?} must be at most {MAX_WORKSPACE_SIDE} m a side", self.min, self.max),
+            );
+        }
+        if self.obstacles.len() > MAX_OBSTACLES {
+            return invalid("obstacles", format!("{} obstacles; at most {MAX_OBSTACLES}", self.obstacles.len()));
         }
         for (field, p) in [("start", self.start), ("goal", self.goal)] {
             if !(finite(&p) && self.contains(p)) {
@@ -313,6 +329,7 @@ radius = 1.0
             (GOOD.replace("start = [1.0, 5.0]", "start = [10.0, 5.2]"), "start"),
             (GOOD.replace("goal = [19.0, 5.0]", "goal = [25.0, 5.0]"), "goal"),
             (GOOD.replace("kind = \"circle\"", "kind = \"blob\""), "blob"),
+            (GOOD.replace("max = [20.0, 10.0]", "max = [1e300, 10.0]"), "at most 200 m a side"),
         ];
         for (text, named) in cases {
             let (_dir, path) = write("bad.toml", &text);

@@ -2,6 +2,8 @@
 //! `fastrack-server` binary on a free loopback port, connects the client library, and stops the server
 //! (checking that it never panicked) at the end.
 
+pub mod fuzz;
+
 use fastrack_client::{ClientOptions, FastrackClient};
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::manifest::{Manifest, NetworkInfo, Provenance, SystemInfo, TebRow, SCHEMA_VERSION};

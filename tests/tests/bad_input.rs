@@ -209,6 +209,14 @@ async fn bad_requests_get_their_status_and_a_precise_message() {
     assert_eq!(Code::from_i32(error.code), Code::OutOfRange, "{}", error.message);
     assert!(error.message.contains("not a finite number"), "{}", error.message);
 
+    // A heading of any finite size is an angle: wrapped exactly (its residue, in double precision) before
+    // the 32-bit graph sees it, so f64::MAX is answered with the value at its residue, not refused or NaN.
+    let heading = f64::MAX;
+    let residue = fastrack_valuefn::system::wrap_periodic(heading, -std::f64::consts::PI, std::f64::consts::PI);
+    let far = evaluate(&client, vec![0.1, 0.2, heading, 1.0], vec![1.0, 1.0]).await.unwrap().values[0];
+    let near = evaluate(&client, vec![0.1, 0.2, residue, 1.0], vec![1.0, 1.0]).await.unwrap().values[0];
+    assert!(far.is_finite() && (far - near).abs() <= 1e-6, "V at theta = f64::MAX: {far}, at its residue {near}");
+
     assert!(server.is_running(), "the server survived every bad request");
     assert!(evaluate(&client, ok_state, vec![1.0, 1.0]).await.is_ok());
 }

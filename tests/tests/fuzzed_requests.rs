@@ -5,22 +5,18 @@
 //! `FASTRACK_FUZZ_CASES` sets the cases per RPC (default 500; a long run is a matter of raising it).
 
 use fastrack_client::{model_ref, pb};
+use fastrack_e2e::fuzz::{cases, Tally};
 use fastrack_e2e::{write_test_bundle, TestServer};
 use fastrack_valuefn::system::dubins4d;
 use pb::safety_service_client::SafetyServiceClient;
 use proptest::prelude::*;
 use proptest::test_runner::{Config, TestCaseError, TestRunner};
 use std::cell::{Cell, RefCell};
-use std::collections::BTreeMap;
 use tonic::transport::Channel;
 use tonic::Code;
 
 /// Statuses a request's content may earn; anything else (INTERNAL, UNKNOWN, UNAVAILABLE) is a failure.
 const INPUT_CODES: [Code; 3] = [Code::InvalidArgument, Code::OutOfRange, Code::NotFound];
-
-fn cases() -> u32 {
-    std::env::var("FASTRACK_FUZZ_CASES").ok().and_then(|v| v.parse().ok()).unwrap_or(500)
-}
 
 /// Numbers a client might send: ordinary ones inside and outside the domain, and every kind of edge.
 fn number() -> impl Strategy<Value = f64> {
@@ -116,19 +112,11 @@ fn every_rpc_answers_random_requests_with_a_reply_or_a_precise_status() {
     let channel: Channel = runtime.block_on(Channel::from_shared(server.endpoint.clone()).unwrap().connect()).unwrap();
     let service = SafetyServiceClient::new(channel);
     // A runner per RPC: one runner counts its cases across runs.
-    let config = Config { cases: cases(), failure_persistence: None, ..Config::default() };
+    let config = Config { cases: cases(500), failure_persistence: None, ..Config::default() };
     let runner = || TestRunner::new(config.clone());
     // Answers and refusals per RPC: the draws must reach both, or the properties check little.
-    let tally: RefCell<BTreeMap<&str, (u32, u32)>> = RefCell::default();
-    let count = |rpc: &'static str, answered: bool| {
-        let mut tally = tally.borrow_mut();
-        let entry = tally.entry(rpc).or_default();
-        if answered {
-            entry.0 += 1;
-        } else {
-            entry.1 += 1;
-        }
-    };
+    let tally = RefCell::new(Tally::new("requests", config.cases));
+    let count = |rpc: &'static str, answered: bool| tally.borrow_mut().count(rpc, answered);
 
     runner()
         .run(&batch(), |(model, states, params, out_of_domain)| {
@@ -232,12 +220,12 @@ fn every_rpc_answers_random_requests_with_a_reply_or_a_precise_status() {
         })
         .unwrap();
 
-    for (rpc, (answered, refused)) in tally.borrow().iter() {
-        eprintln!("{rpc}: {answered} answered, {refused} refused");
-        assert!(*answered > 0 && *refused > 0, "{rpc}: {answered} answered, {refused} refused");
+    let tally = tally.into_inner();
+    for rpc in ["EvaluateValue", "TrackingControl", "QueryPlannerControl", "GetTrackingErrorBound", "Track"] {
+        tally.assert_both(rpc);
     }
-    assert_eq!(tally.borrow().len(), 5);
     assert!(server.is_running(), "the server exited:\n{}", server.log_text());
     runtime.block_on(client.wait_until_serving(std::time::Duration::from_secs(5))).unwrap();
     assert!(!server.log_text().contains("panicked"), "a panic in the log:\n{}", server.log_text());
+    tally.report();
 }

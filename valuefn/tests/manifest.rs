@@ -1,6 +1,6 @@
 //! Manifest validation and bundle checks: each failure names its field or file.
 
-use fastrack_valuefn::bundle::{Bundle, BundleError};
+use fastrack_valuefn::bundle::{scan_repository, Bundle, BundleError, MAX_MANIFEST_BYTES};
 use fastrack_valuefn::manifest::{
     AxisNetworkInfo, Manifest, NetworkInfo, Provenance, SystemInfo, TebRow, Verification, COMPOSITE_KIND,
     SCHEMA_VERSION,
@@ -150,6 +150,58 @@ fn bundle_checksum_and_location_are_checked() {
     std::fs::copy(dir.join("manifest.json"), moved.join("manifest.json")).unwrap();
     let err = Bundle::load(&moved).unwrap_err();
     assert!(err.to_string().contains("folder says m/2, manifest says m/1"), "{err}");
+}
+
+#[cfg(unix)]
+#[test]
+fn a_served_repository_is_read_only_inside_itself_and_only_as_bounded_regular_files() {
+    use std::os::unix::fs::symlink;
+    let root = tempfile::tempdir().unwrap();
+    let outside = tempfile::tempdir().unwrap();
+    let dir = Bundle::write(root.path(), manifest(), b"graph bytes").unwrap();
+    Bundle::load_within(root.path(), &dir).unwrap();
+
+    // A link that stays inside the repository is followed (mounted volumes are made of such links).
+    let shared = root.path().join("shared.onnx");
+    std::fs::rename(dir.join("model.onnx"), &shared).unwrap();
+    symlink(&shared, dir.join("model.onnx")).unwrap();
+    assert_eq!(Bundle::load_within(root.path(), &dir).unwrap().onnx, b"graph bytes");
+
+    // A link leading out of it is refused, naming both ends; a tool reading a bundle anywhere follows it.
+    let stolen = outside.path().join("model.onnx");
+    std::fs::copy(&shared, &stolen).unwrap();
+    std::fs::remove_file(dir.join("model.onnx")).unwrap();
+    symlink(&stolen, dir.join("model.onnx")).unwrap();
+    let err = Bundle::load_within(root.path(), &dir).unwrap_err();
+    assert!(matches!(err, BundleError::OutsideRepository { .. }), "{err}");
+    assert!(err.to_string().contains("outside the model repository") && err.to_string().contains("model.onnx"));
+    Bundle::load(&dir).unwrap();
+
+    // So is a version folder that is a link out of the repository, though the scan lists it.
+    let mut elsewhere = manifest();
+    elsewhere.version = 2;
+    let foreign = Bundle::write(outside.path(), elsewhere, b"graph bytes").unwrap();
+    symlink(&foreign, root.path().join("m").join("2")).unwrap();
+    let (found, _) = scan_repository(root.path()).unwrap();
+    let linked = found.iter().find(|v| v.version == 2).expect("a linked version folder is listed");
+    let err = Bundle::load_within(root.path(), &linked.path).unwrap_err();
+    assert!(matches!(err, BundleError::OutsideRepository { .. }), "{err}");
+
+    // A device in place of the graph is not read (it would never end), nor a manifest past the size limit.
+    std::fs::remove_file(dir.join("model.onnx")).unwrap();
+    symlink("/dev/zero", dir.join("model.onnx")).unwrap();
+    let err = Bundle::load(&dir).unwrap_err();
+    assert!(matches!(err, BundleError::NotAFile { .. }), "{err}");
+    std::fs::File::create(dir.join("manifest.json")).unwrap().set_len(MAX_MANIFEST_BYTES + 1).unwrap();
+    let err = Bundle::load(&dir).unwrap_err();
+    assert!(err.to_string().contains("more than the 16777216 a bundle's manifest may have"), "{err}");
+
+    // A dangling link is skipped with its reason; the scan itself goes on.
+    symlink(root.path().join("nowhere"), root.path().join("ghost")).unwrap();
+    let (found, skipped) = scan_repository(root.path()).unwrap();
+    assert_eq!(found.len(), 2);
+    let (_, why) = skipped.iter().find(|(p, _)| p.ends_with("ghost")).expect("the dangling link is reported");
+    assert!(why.contains("dangling"), "{why}");
 }
 
 /// A verification of `row` that sampled `{V <= sampled}` with `correction` and reached `verified`.

@@ -100,8 +100,38 @@ pub(crate) fn error_norm(error_coords: &[usize], r: &[f64]) -> f64 {
     error_coords.iter().map(|&i| r[i] * r[i]).sum::<f64>().sqrt()
 }
 
-/// `x` wrapped into the period `[min, max)`.
+/// `x` wrapped into the period `[min, max)`, exactly for every finite `x` (the remainder of a division is
+/// exact in floating point, so an angle of 1e300 rad wraps to its true residue, not to rounding noise).
 pub fn wrap_periodic(x: f64, min: f64, max: f64) -> f64 {
-    let period = max - min;
-    x - period * ((x - min) / period).floor()
+    let wrapped = min + (x - min).rem_euclid(max - min);
+    // The remainder of a tiny negative offset rounds up to the whole period.
+    if wrapped >= max {
+        min
+    } else {
+        wrapped
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::wrap_periodic;
+    use std::f64::consts::PI;
+
+    #[test]
+    fn periodic_coordinates_wrap_into_their_period_for_every_finite_number() {
+        // Ordinary angles: the residue the floor formula gives.
+        for x in [-7.0, -PI, -0.3, 0.0, 0.3, PI - 1e-9, 4.0, 12.5] {
+            let expected = x - 2.0 * PI * ((x + PI) / (2.0 * PI)).floor();
+            assert!((wrap_periodic(x, -PI, PI) - expected).abs() < 1e-12, "{x}");
+        }
+        // Extremes stay inside the period (the floor formula left f64::MAX far outside it).
+        for x in [f64::MAX, -f64::MAX, 1e300, -1e30, f64::MIN_POSITIVE, -1e-18] {
+            let w = wrap_periodic(x, -PI, PI);
+            assert!((-PI..PI).contains(&w), "{x} wrapped to {w}");
+        }
+        // A whole number of periods of a power-of-two period is exactly the start of the period.
+        assert_eq!(wrap_periodic(2f64.powi(80), 0.0, 2.0), 0.0);
+        // A tiny negative offset whose remainder rounds to the whole period wraps to its start.
+        assert_eq!(wrap_periodic(-1e-18, 0.0, 2.0 * PI), 0.0);
+    }
 }
