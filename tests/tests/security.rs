@@ -72,6 +72,41 @@ async fn tokens_authenticate_users_and_authorise_admins() {
     }
 }
 
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn tokens_from_files_one_per_file_as_a_mounted_secret_gives_them() {
+    let repo = repository();
+    let secret = tempfile::tempdir().unwrap();
+    let (user, admin) = (secret.path().join("user-token"), secret.path().join("admin-token"));
+    std::fs::write(&user, format!("{USER}\n")).unwrap();
+    std::fs::write(&admin, ADMIN).unwrap();
+    let (user, admin) = (user.to_str().unwrap(), admin.to_str().unwrap());
+    let args = ["--user-token-file", user, "--admin-token-file", admin];
+    let (server, anonymous) = TestServer::start_observed(repo.path(), &args).await;
+    let e = anonymous.list_models().await.unwrap_err();
+    assert_eq!(e.code(), Some(tonic::Code::Unauthenticated), "{e}");
+    let cli = |token_file: &str, command: &str| {
+        std::process::Command::new(fastrack_e2e::binary("fastrack"))
+            .args(["--server", &server.endpoint, "--token-file", token_file, command, "dubins-test"])
+            .output()
+            .unwrap()
+    };
+    // The CLI reads its token from a file too: the user token answers, only the admin token reloads.
+    let out = cli(user, "model");
+    assert!(out.status.success(), "{}", String::from_utf8_lossy(&out.stderr));
+    let out = cli(user, "reload-model");
+    assert!(String::from_utf8_lossy(&out.stderr).contains("admin token"), "{}", String::from_utf8_lossy(&out.stderr));
+    assert!(cli(admin, "reload-model").status.success());
+    // A file that is not one token is refused before any call.
+    let two = secret.path().join("two");
+    std::fs::write(&two, "a b\n").unwrap();
+    let out = cli(two.to_str().unwrap(), "model");
+    assert!(
+        String::from_utf8_lossy(&out.stderr).contains("exactly one token"),
+        "{}",
+        String::from_utf8_lossy(&out.stderr)
+    );
+}
+
 /// A CA, a server certificate for `localhost` and a client certificate, as PEM files in `dir`.
 struct Pki {
     ca: Vec<u8>,

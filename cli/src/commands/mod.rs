@@ -31,8 +31,11 @@ pub struct Cli {
     #[arg(long, global = true)]
     json: bool,
     /// Bearer token sent as `authorization: Bearer <token>` on every call.
-    #[arg(long, env = "FASTRACK_TOKEN", hide_env_values = true, global = true)]
+    #[arg(long, env = "FASTRACK_TOKEN", hide_env_values = true, global = true, conflicts_with = "token_file")]
     token: Option<String>,
+    /// File holding the bearer token and nothing else (e.g. a mounted Secret key), instead of --token.
+    #[arg(long, env = "FASTRACK_TOKEN_FILE", global = true)]
+    token_file: Option<PathBuf>,
     /// PEM file of the CA that signed the server's certificate: connect with TLS (the server address must
     /// start with https://).
     #[arg(long, global = true)]
@@ -151,5 +154,19 @@ fn client_options(cli: &Cli) -> anyhow::Result<ClientOptions> {
         (None, None, None) if cli.tls_domain.is_none() => None,
         (None, ..) => anyhow::bail!("--tls-cert, --tls-key and --tls-domain need --tls-ca"),
     };
-    Ok(ClientOptions { connect_timeout: timeout, request_timeout: timeout, bearer_token: cli.token.clone(), tls })
+    let bearer_token = match &cli.token_file {
+        Some(path) => {
+            let text = String::from_utf8(read(path)?).with_context(|| format!("{} is not UTF-8", path.display()))?;
+            let token = text.trim();
+            if token.is_empty() || token.contains(char::is_whitespace) {
+                anyhow::bail!(
+                    "token file {} must hold exactly one token (no spaces or line breaks inside it)",
+                    path.display()
+                );
+            }
+            Some(token.to_string())
+        }
+        None => cli.token.clone(),
+    };
+    Ok(ClientOptions { connect_timeout: timeout, request_timeout: timeout, bearer_token, tls })
 }
