@@ -111,6 +111,8 @@ async def test_async_errors_and_pipelining(server: Server) -> None:
         with pytest.raises(fastrack.NotFound):
             await client.get_model("dubins4x")
         async with client.track(MODEL) as robot:
+            with pytest.raises(fastrack.FastrackError, match="recv\\(\\) without a tick"):
+                await robot.recv()  # before any send: a usage error, not a wait forever
             sent = [await robot.send(*robot_state(seq, 2)) for seq in range(10)]
             assert [(await robot.recv()).seq for _ in sent] == sent
             with pytest.raises(fastrack.InvalidArgument, match="must be a finite number"):

@@ -146,7 +146,7 @@ class AsyncClient:
         return found
 
     async def query_planner_control(
-        self, model: str, d_obs: float | None = None, *, version: int = 0, timeout: float | None = None
+        self, model: str, d_obs: convert.Real | None = None, *, version: int = 0, timeout: float | None = None
     ) -> results.PlannerControl:
         """queryPlannerControl for an obstacle at ``d_obs`` metres (None: none sensed)."""
         request = safety_pb2.QueryPlannerControlRequest(model=convert.model_ref(model, version))
@@ -157,7 +157,7 @@ class AsyncClient:
     async def tracking_error_bound(
         self,
         model: str,
-        beta: float,
+        beta: convert.Real,
         boundary_points: int = 0,
         *,
         version: int = 0,
@@ -165,7 +165,7 @@ class AsyncClient:
     ) -> results.TrackingErrorBound:
         """The tracking error bound for planner speed bound ``beta`` (m/s)."""
         request = safety_pb2.GetTrackingErrorBoundRequest(
-            model=convert.model_ref(model, version), beta=beta, boundary_points=boundary_points
+            model=convert.model_ref(model, version), beta=float(beta), boundary_points=boundary_points
         )
         reply = await self._unary(lambda r: r.safety.GetTrackingErrorBound, request, timeout)
         return convert.tracking_error_bound(reply)

@@ -151,7 +151,7 @@ class Client:
         return found
 
     def query_planner_control(
-        self, model: str, d_obs: float | None = None, *, version: int = 0, timeout: float | None = None
+        self, model: str, d_obs: convert.Real | None = None, *, version: int = 0, timeout: float | None = None
     ) -> results.PlannerControl:
         """queryPlannerControl: the fastest planner speed bound whose TEB fits ``d_obs / 2``.
 
@@ -166,7 +166,7 @@ class Client:
     def tracking_error_bound(
         self,
         model: str,
-        beta: float,
+        beta: convert.Real,
         boundary_points: int = 0,
         *,
         version: int = 0,
@@ -175,7 +175,7 @@ class Client:
         """The tracking error bound for planner speed bound ``beta`` (m/s, within the model's range), with
         ``boundary_points`` points on its boundary (0: none, at most 4096)."""
         request = safety_pb2.GetTrackingErrorBoundRequest(
-            model=convert.model_ref(model, version), beta=beta, boundary_points=boundary_points
+            model=convert.model_ref(model, version), beta=float(beta), boundary_points=boundary_points
         )
         return convert.tracking_error_bound(self._unary(lambda r: r.safety.GetTrackingErrorBound, request, timeout))
 
@@ -192,8 +192,8 @@ class Client:
         """V, dV/dr, the optimal control u* and TEB membership for a batch.
 
         ``states`` are relative states r [N, n_state] (dubins4d: x_r m, y_r m, theta rad, v m/s); ``params``
-        [N, n_params] (dubins4d: beta_1, beta_2 in m/s), or one row (or number) for every item. Shapes are
-        checked against the model before sending.
+        [N, n_params] (the shipped dubins4d has one, beta in m/s; :meth:`get_model` lists a model's), or one
+        row (or number) for every item. Shapes are checked against the model before sending.
         """
         dims = self.dims(model, version)
         s, p, n = convert.batch(dims, states, params)

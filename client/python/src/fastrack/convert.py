@@ -5,7 +5,7 @@ from __future__ import annotations
 
 from collections.abc import Sequence
 from dataclasses import dataclass
-from typing import Literal
+from typing import Any, Literal, Union
 
 import numpy as np
 import numpy.typing as npt
@@ -13,6 +13,9 @@ import numpy.typing as npt
 from . import results
 from .errors import InvalidArgument, from_status
 from .v1 import models_pb2, safety_pb2
+
+#: A real number as a caller may hold it: a Python float or int, or a numpy scalar of any precision.
+Real = Union[float, np.floating[Any], np.integer[Any]]
 
 OutOfDomain = Literal["default", "reject", "flag"]
 """How a batch treats states outside the trained domain: ``"default"`` rejects a single item
@@ -148,7 +151,7 @@ def _vector(field: str, value: npt.ArrayLike, size: int, what: str, dims: Dims) 
 
 
 def tick(
-    dims: Dims, seq: int, tracker_state: npt.ArrayLike, planner_state: npt.ArrayLike, d_obs: float | None
+    dims: Dims, seq: int, tracker_state: npt.ArrayLike, planner_state: npt.ArrayLike, d_obs: Real | None
 ) -> safety_pb2.TrackRequest:
     """A ``Track`` tick, its vectors checked against the model (tracker [n_state], planner [planner_dim])."""
     tracker = _vector("tracker_state", tracker_state, len(dims.state), ", ".join(dims.state), dims)

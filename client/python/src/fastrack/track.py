@@ -201,7 +201,7 @@ class TrackStream:
             return None
         return from_status(self._call.code(), self._call.details() or "the Track stream ended")
 
-    def send(self, tracker_state: npt.ArrayLike, planner_state: npt.ArrayLike, d_obs: float | None = None) -> int:
+    def send(self, tracker_state: npt.ArrayLike, planner_state: npt.ArrayLike, d_obs: convert.Real | None = None) -> int:
         """Sends one tick without waiting for its reply; returns its ``seq``.
 
         ``tracker_state`` is the tracker's state s [n_state] (dubins4d: x m, y m, heading rad, speed m/s),
@@ -245,7 +245,7 @@ class TrackStream:
                 raise _no_replica(why, "every replica took it and lost it again without answering")
             self._reopen(why)
 
-    def tick(self, tracker_state: npt.ArrayLike, planner_state: npt.ArrayLike, d_obs: float | None = None) -> TrackReply:
+    def tick(self, tracker_state: npt.ArrayLike, planner_state: npt.ArrayLike, d_obs: convert.Real | None = None) -> TrackReply:
         """Sends one tick and waits for its reply (see :meth:`send` for the arguments)."""
         self.send(tracker_state, planner_state, d_obs)
         return self.recv()
@@ -367,7 +367,7 @@ class AsyncTrackStream:
         return self._call
 
     async def send(
-        self, tracker_state: npt.ArrayLike, planner_state: npt.ArrayLike, d_obs: float | None = None
+        self, tracker_state: npt.ArrayLike, planner_state: npt.ArrayLike, d_obs: convert.Real | None = None
     ) -> int:
         """Sends one tick without waiting for its reply; returns its ``seq`` (arguments as :meth:`TrackStream.send`)."""
         request = convert.tick(self._dims, self._sequence.next_seq, tracker_state, planner_state, d_obs)
@@ -423,7 +423,7 @@ class AsyncTrackStream:
             await self._reopen(why)
 
     async def tick(
-        self, tracker_state: npt.ArrayLike, planner_state: npt.ArrayLike, d_obs: float | None = None
+        self, tracker_state: npt.ArrayLike, planner_state: npt.ArrayLike, d_obs: convert.Real | None = None
     ) -> TrackReply:
         """Sends one tick and waits for its reply."""
         await self.send(tracker_state, planner_state, d_obs)
