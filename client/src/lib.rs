@@ -143,9 +143,18 @@ pub enum ClientError {
     /// The server answered with an error status (or the transport failed during the call).
     #[error("{}", status_text(.0))]
     Status(tonic::Status),
-    /// The server did not become ready in time.
-    #[error("server not SERVING after {0:?}")]
-    NotReady(Duration),
+    /// Fewer replicas than asked for became ready in time.
+    #[error("{serving} of {replicas} replicas SERVING after {timeout:?}, {quorum} wanted")]
+    NotReady {
+        /// Replicas SERVING at the deadline.
+        serving: usize,
+        /// Replicas of the client.
+        replicas: usize,
+        /// Replicas that had to be SERVING.
+        quorum: usize,
+        /// How long the client waited.
+        timeout: Duration,
+    },
     /// A TLS setting is unusable (e.g. a PEM file without a certificate or key).
     #[error("TLS {what}: {reason}")]
     Tls {
@@ -323,18 +332,49 @@ impl FastrackClient {
         Ok(response.into_inner().status())
     }
 
-    /// Polls health until SERVING or `timeout`.
+    /// Polls every replica's health until all of them are SERVING, or `timeout` (a fleet that starts once
+    /// this returns spreads its streams over every replica).
     pub async fn wait_until_serving(&self, timeout: Duration) -> Result<(), ClientError> {
+        self.wait_until_quorum(self.replicas.count(), timeout).await
+    }
+
+    /// Polls every replica's health until at least `quorum` of them (clamped to 1 ..= the number of
+    /// replicas) are SERVING, or `timeout`.
+    pub async fn wait_until_quorum(&self, quorum: usize, timeout: Duration) -> Result<(), ClientError> {
+        let replicas = self.replicas.count();
+        let quorum = quorum.clamp(1, replicas);
         let start = std::time::Instant::now();
         loop {
-            if matches!(self.health().await, Ok(HealthStatus::Serving)) {
+            let serving = self.serving_replicas().await.len();
+            if serving >= quorum {
                 return Ok(());
             }
             if start.elapsed() > timeout {
-                return Err(ClientError::NotReady(timeout));
+                return Err(ClientError::NotReady { serving, replicas, quorum, timeout });
             }
             tokio::time::sleep(Duration::from_millis(50)).await;
         }
+    }
+
+    /// The endpoints of the replicas whose health is SERVING now (each asked once, within the request
+    /// timeout).
+    pub async fn serving_replicas(&self) -> Vec<String> {
+        let mut serving = Vec::new();
+        for replica in self.replicas.rotation() {
+            let request = self.request(tonic_health::pb::HealthCheckRequest { service: String::new() });
+            let mut health = HealthClient::new(replica.channel.clone());
+            if let Ok(Ok(reply)) = tokio::time::timeout(self.request_timeout, health.check(request)).await {
+                if reply.into_inner().status() == HealthStatus::Serving {
+                    serving.push(replica.endpoint.clone());
+                }
+            }
+        }
+        serving
+    }
+
+    /// The client's open `Track` streams on each replica, in the order of [`FastrackClient::endpoints`].
+    pub fn stream_counts(&self) -> Vec<usize> {
+        self.replicas.stream_counts()
     }
 
     /// Every loaded model version.

@@ -1,4 +1,6 @@
-//! The replicas a client talks to: one channel per server address, taken round-robin call by call.
+//! The replicas a client talks to: one channel per server address, taken round-robin call by call, and the
+//! count of the client's open `Track` streams on each, by which streams balance themselves over the replicas
+//! that serve (a replica that comes back gets its share again).
 //!
 //! A server address is a list of endpoints separated by commas (`http://10.0.0.5:50051,http://10.0.0.6:50051`),
 //! or one endpoint whose host name resolves to several addresses (a Kubernetes headless Service): each address
@@ -9,13 +11,22 @@ use crate::ClientError;
 use std::collections::hash_map::RandomState;
 use std::hash::{BuildHasher, Hasher};
 use std::sync::atomic::{AtomicUsize, Ordering};
+use std::sync::Mutex;
+use std::time::{Duration, Instant};
 use tonic::transport::{Channel, Endpoint, Uri};
+
+/// How long a replica that refused a stream is left out of balancing.
+const REFUSED_PAUSE: Duration = Duration::from_secs(5);
 
 /// The replicas of one client, shared by its clones.
 #[derive(Debug)]
 pub struct Replicas {
     replicas: Vec<Replica>,
     next: AtomicUsize,
+    /// The client's open `Track` streams per replica.
+    streams: Vec<AtomicUsize>,
+    /// When each replica last refused a stream (it is left out of balancing for a while).
+    refused: Mutex<Vec<Option<Instant>>>,
 }
 
 /// One server: where it is and the channel to it (connected lazily if it was down when the client connected).
@@ -32,7 +43,9 @@ impl Replicas {
     /// first calls too).
     pub fn new(replicas: Vec<Replica>) -> Self {
         let start = RandomState::new().build_hasher().finish() as usize;
-        Self { replicas, next: AtomicUsize::new(start) }
+        let streams = replicas.iter().map(|_| AtomicUsize::new(0)).collect();
+        let refused = Mutex::new(vec![None; replicas.len()]);
+        Self { replicas, next: AtomicUsize::new(start), streams, refused }
     }
 
     /// How many replicas there are.
@@ -48,8 +61,50 @@ impl Replicas {
     /// Every replica once, from the next in round-robin order on: where a call goes, then where it goes again
     /// if that replica is gone.
     pub fn rotation(&self) -> impl Iterator<Item = &Replica> {
+        self.indexed_rotation().map(|(_, replica)| replica)
+    }
+
+    /// [`Replicas::rotation`] with each replica's index.
+    pub(crate) fn indexed_rotation(&self) -> impl Iterator<Item = (usize, &Replica)> {
         let (start, count) = (self.next.fetch_add(1, Ordering::Relaxed), self.replicas.len());
-        (0..count).map(move |k| &self.replicas[(start + k) % count])
+        (0..count).map(move |k| ((start + k) % count, &self.replicas[(start + k) % count]))
+    }
+
+    /// The replica at `index`.
+    pub(crate) fn get(&self, index: usize) -> &Replica {
+        &self.replicas[index]
+    }
+
+    /// The client's open `Track` streams on each replica, in the order of [`Replicas::endpoints`].
+    pub fn stream_counts(&self) -> Vec<usize> {
+        self.streams.iter().map(|n| n.load(Ordering::Relaxed)).collect()
+    }
+
+    /// Counts a stream opened on `index`.
+    pub(crate) fn stream_opened(&self, index: usize) {
+        self.streams[index].fetch_add(1, Ordering::Relaxed);
+    }
+
+    /// Counts a stream closed (or moved away) on `index`.
+    pub(crate) fn stream_closed(&self, index: usize) {
+        self.streams[index].fetch_sub(1, Ordering::Relaxed);
+    }
+
+    /// Remembers that `index` refused a stream: balancing leaves it alone for a while.
+    pub(crate) fn refused(&self, index: usize) {
+        self.refused.lock().unwrap_or_else(|e| e.into_inner())[index] = Some(Instant::now());
+    }
+
+    /// Where a stream on `from` should move to even the load: the replica with the fewest of the client's
+    /// streams, if it has at least two fewer than `from` (one move then narrows the gap) and has not refused
+    /// a stream lately.
+    pub(crate) fn lighter_than(&self, from: usize) -> Option<usize> {
+        let refused = self.refused.lock().unwrap_or_else(|e| e.into_inner());
+        let counts = self.stream_counts();
+        (0..self.replicas.len())
+            .filter(|&i| i != from && refused[i].is_none_or(|at| at.elapsed() >= REFUSED_PAUSE))
+            .min_by_key(|&i| counts[i])
+            .filter(|&i| counts[i] + 2 <= counts[from])
     }
 
     /// Every replica's endpoint.

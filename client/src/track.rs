@@ -6,20 +6,30 @@
 //! again, so every tick is answered exactly once as seen by the robot. A stream that every replica in turn
 //! takes and loses without answering gives up. Nothing else needs carrying over: a reply depends on its tick
 //! alone, and the bound in force (`beta_old`) is the robot's own loop's.
+//!
+//! For the same reason a stream can move when nothing is lost: at most once every [`BALANCE_EVERY`], a
+//! stream on a replica holding at least two more of the client's streams than another opens a second stream
+//! there in the background, and moves to it at its next tick with every earlier tick answered; so streams
+//! spread evenly over the replicas that serve, and come back to one that returns, and the robot never waits
+//! for the move (a replica that refuses or does not answer is simply not moved to).
 
 use crate::replicas::replica_lost;
 use crate::{pb, ClientError, FastrackClient};
 use std::collections::VecDeque;
+use std::time::{Duration, Instant};
 use tokio_stream::wrappers::ReceiverStream;
 
 /// Ticks buffered between the robot and the connection.
 const SEND_BUFFER: usize = 64;
+/// Least time between two looks of a stream at the balance of the replicas.
+pub const BALANCE_EVERY: Duration = Duration::from_secs(1);
 
 /// An open `Track` stream: send ticks, read replies in order.
 pub struct TrackStream {
     client: FastrackClient,
     open: pb::TrackOpen,
-    endpoint: String,
+    /// The replica serving it (an index into the client's replicas).
+    replica: usize,
     ticks: tokio::sync::mpsc::Sender<pb::TrackRequest>,
     replies: tonic::Streaming<pb::TrackResponse>,
     /// Sent and not answered yet, oldest first.
@@ -30,13 +40,25 @@ pub struct TrackStream {
     moves_unanswered: usize,
     reopened: usize,
     resent: usize,
+    rebalanced: usize,
+    balance_checked: Instant,
+    /// A stream being opened on a lighter replica, for the next move.
+    pending_move: Option<tokio::task::JoinHandle<Result<Opened, Refusal>>>,
 }
 
 /// A stream on one replica.
 struct Opened {
-    endpoint: String,
+    replica: usize,
     ticks: tokio::sync::mpsc::Sender<pb::TrackRequest>,
     replies: tonic::Streaming<pb::TrackResponse>,
+}
+
+/// Why a replica did not open a stream.
+enum Refusal {
+    /// It is gone, full or silent: another may take the stream.
+    PassOn(tonic::Status),
+    /// It refused the stream itself (e.g. an unknown model): no replica will take it.
+    Final(tonic::Status),
 }
 
 impl TrackStream {
@@ -44,10 +66,11 @@ impl TrackStream {
     /// replica tried once).
     pub(crate) async fn open(client: &FastrackClient, open: pb::TrackOpen) -> Result<Self, ClientError> {
         let opened = Self::open_somewhere(client, &open).await?;
+        client.replicas.stream_opened(opened.replica);
         Ok(Self {
             client: client.clone(),
             open,
-            endpoint: opened.endpoint,
+            replica: opened.replica,
             ticks: opened.ticks,
             replies: opened.replies,
             unanswered: VecDeque::new(),
@@ -55,36 +78,82 @@ impl TrackStream {
             moves_unanswered: 0,
             reopened: 0,
             resent: 0,
+            rebalanced: 0,
+            balance_checked: Instant::now(),
+            pending_move: None,
         })
     }
 
     async fn open_somewhere(client: &FastrackClient, open: &pb::TrackOpen) -> Result<Opened, ClientError> {
         let mut last = None;
-        for replica in client.replicas.rotation() {
-            let (tx, rx) = tokio::sync::mpsc::channel(SEND_BUFFER);
-            let message = pb::TrackRequest { msg: Some(pb::track_request::Msg::Open(open.clone())) };
-            tx.send(message).await.map_err(|_| tonic::Status::internal("stream closed before its open message"))?;
-            let mut service = pb::safety_service_client::SafetyServiceClient::new(replica.channel.clone());
-            let call = service.track(client.authorized(ReceiverStream::new(rx)));
-            // A replica that takes the connection but never answers is as good as gone.
-            match tokio::time::timeout(client.request_timeout, call).await {
-                Ok(Ok(response)) => {
-                    return Ok(Opened { endpoint: replica.endpoint.clone(), ticks: tx, replies: response.into_inner() })
-                }
-                // A replica that is gone, or that holds all the streams it allows: try the next.
-                Ok(Err(status)) if replica_lost(&status) || status.code() == tonic::Code::ResourceExhausted => {
-                    last = Some(status)
-                }
-                Ok(Err(status)) => return Err(status.into()),
-                Err(_) => {
-                    last = Some(tonic::Status::unavailable(format!(
-                        "{} did not open the stream within {:?}",
-                        replica.endpoint, client.request_timeout
-                    )))
-                }
+        for (index, _) in client.replicas.indexed_rotation() {
+            match Self::open_on(client, index, open).await {
+                Ok(opened) => return Ok(opened),
+                Err(Refusal::PassOn(status)) => last = Some(status),
+                Err(Refusal::Final(status)) => return Err(status.into()),
             }
         }
         Err(last.unwrap_or_else(|| tonic::Status::unavailable("no replica to open a Track stream on")).into())
+    }
+
+    async fn open_on(client: &FastrackClient, index: usize, open: &pb::TrackOpen) -> Result<Opened, Refusal> {
+        let replica = client.replicas.get(index);
+        let (tx, rx) = tokio::sync::mpsc::channel(SEND_BUFFER);
+        let message = pb::TrackRequest { msg: Some(pb::track_request::Msg::Open(open.clone())) };
+        if tx.send(message).await.is_err() {
+            return Err(Refusal::Final(tonic::Status::internal("stream closed before its open message")));
+        }
+        let mut service = pb::safety_service_client::SafetyServiceClient::new(replica.channel.clone());
+        let call = service.track(client.authorized(ReceiverStream::new(rx)));
+        // A replica that takes the connection but never answers is as good as gone.
+        match tokio::time::timeout(client.request_timeout, call).await {
+            Ok(Ok(response)) => Ok(Opened { replica: index, ticks: tx, replies: response.into_inner() }),
+            // A replica that is gone, or that holds all the streams it allows: try the next.
+            Ok(Err(status)) if replica_lost(&status) || status.code() == tonic::Code::ResourceExhausted => {
+                client.replicas.refused(index);
+                Err(Refusal::PassOn(status))
+            }
+            Ok(Err(status)) => Err(Refusal::Final(status)),
+            Err(_) => {
+                client.replicas.refused(index);
+                Err(Refusal::PassOn(tonic::Status::unavailable(format!(
+                    "{} did not open the stream within {:?}",
+                    replica.endpoint, client.request_timeout
+                ))))
+            }
+        }
+    }
+
+    /// Serves the stream from `opened` from now on, counting the move in the client's balance.
+    fn move_to(&mut self, opened: Opened) {
+        self.client.replicas.stream_closed(self.replica);
+        self.client.replicas.stream_opened(opened.replica);
+        (self.replica, self.ticks, self.replies) = (opened.replica, opened.ticks, opened.replies);
+    }
+
+    /// With every tick answered: moves to the stream opened in the background, if it is open; else, at most
+    /// once every [`BALANCE_EVERY`], starts opening one on a replica with at least two fewer of the client's
+    /// streams.
+    async fn balance(&mut self) {
+        if !self.unanswered.is_empty() {
+            return;
+        }
+        if let Some(pending) = self.pending_move.take_if(|task| task.is_finished()) {
+            // Finished: awaiting it does not wait.
+            if let Ok(Ok(opened)) = pending.await {
+                self.move_to(opened);
+                self.rebalanced += 1;
+            }
+            return;
+        }
+        if self.pending_move.is_some() || self.balance_checked.elapsed() < BALANCE_EVERY {
+            return;
+        }
+        self.balance_checked = Instant::now();
+        if let Some(lighter) = self.client.replicas.lighter_than(self.replica) {
+            let (client, open) = (self.client.clone(), self.open.clone());
+            self.pending_move = Some(tokio::spawn(async move { Self::open_on(&client, lighter, &open).await }));
+        }
     }
 
     /// Reopens on another replica, after `why` ended the stream, and sends the unanswered ticks again.
@@ -99,7 +168,7 @@ impl TrackStream {
         let opened = Self::open_somewhere(&self.client, &self.open).await.map_err(|e| {
             ClientError::Status(tonic::Status::unavailable(format!("{why}; no replica took the stream again: {e}")))
         })?;
-        (self.endpoint, self.ticks, self.replies) = (opened.endpoint, opened.ticks, opened.replies);
+        self.move_to(opened);
         self.lost = false;
         self.reopened += 1;
         for tick in &self.unanswered {
@@ -112,6 +181,9 @@ impl TrackStream {
 
     /// Sends one tick without waiting for its reply.
     pub async fn send(&mut self, tick: pb::TrackTick) -> Result<(), ClientError> {
+        if !self.lost {
+            self.balance().await;
+        }
         self.unanswered.push_back(tick.clone());
         if self.lost {
             return self.reopen("the stream's replica went away").await;
@@ -155,7 +227,7 @@ impl TrackStream {
 
     /// The endpoint of the replica serving the stream now.
     pub fn endpoint(&self) -> &str {
-        &self.endpoint
+        &self.client.replicas.get(self.replica).endpoint
     }
 
     /// How often the stream moved to another replica.
@@ -166,5 +238,19 @@ impl TrackStream {
     /// Ticks sent again after a move, because their first replica never answered them.
     pub fn resent(&self) -> usize {
         self.resent
+    }
+
+    /// How often the stream moved, with nothing lost, to even the load over the replicas.
+    pub fn rebalanced(&self) -> usize {
+        self.rebalanced
+    }
+}
+
+impl Drop for TrackStream {
+    fn drop(&mut self) {
+        self.client.replicas.stream_closed(self.replica);
+        if let Some(pending) = self.pending_move.take() {
+            pending.abort();
+        }
     }
 }

@@ -209,7 +209,11 @@ pub struct TestServer {
 impl TestServer {
     /// Starts the server on `models` with extra arguments; does not wait for health.
     pub fn start(models: &Path, extra_args: &[&str]) -> Self {
-        let port = free_port();
+        Self::start_on(free_port(), models, extra_args)
+    }
+
+    /// [`TestServer::start`] on a given loopback port (e.g. a replica coming back where it was).
+    pub fn start_on(port: u16, models: &Path, extra_args: &[&str]) -> Self {
         let log_dir = tempfile::tempdir().expect("tempdir");
         let log = log_dir.path().join("server.log");
         let log_file = std::fs::File::create(&log).expect("log file");

@@ -1,6 +1,7 @@
 //! A client of several replicas: calls go round-robin, and when a replica dies mid-run every robot's `Track`
 //! stream moves to another one and goes on, each tick answered exactly once, in order, and an online loop
-//! keeps its bound in force across the move.
+//! keeps its bound in force across the move; streams spread evenly over the replicas that serve and come
+//! back to one that returns; a client waits for all its replicas, or a quorum.
 
 use fastrack_client::{model_ref, pb, ClientOptions, FastrackClient};
 use fastrack_e2e::{robot_tick, TestServer};
@@ -230,4 +231,68 @@ async fn an_online_loop_keeps_its_bound_in_force_across_a_failover() {
     }
     let survivor = &servers[1 - victim];
     assert_eq!(survivor.metric("fastrack_active_streams").await, 1.0, "the stream moved to the other replica");
+}
+
+/// Polls `done` every 50 ms until it holds; fails after `limit`, saying `what`.
+async fn within(limit: Duration, what: &str, done: impl Fn() -> bool) {
+    let start = Instant::now();
+    while !done() {
+        assert!(start.elapsed() < limit, "{what} not within {limit:?}");
+        tokio::time::sleep(Duration::from_millis(50)).await;
+    }
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn streams_spread_over_the_replicas_that_serve_and_come_back_to_one_that_returns() {
+    let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
+    let (mut servers, client) = replicas(3).await;
+    client.wait_until_serving(Duration::from_secs(30)).await.unwrap();
+
+    // Waiting for all replicas, or for a quorum, of a client with one address that nothing serves.
+    let dead = format!("http://127.0.0.1:{}", fastrack_e2e::free_port());
+    let address = format!("{},{dead}", client.endpoints().join(","));
+    let with_dead = FastrackClient::connect(&address, ClientOptions::default()).await.unwrap();
+    let e = with_dead.wait_until_serving(Duration::from_millis(300)).await.unwrap_err();
+    assert!(e.to_string().starts_with("3 of 4 replicas SERVING"), "{e}");
+    with_dead.wait_until_quorum(3, Duration::from_secs(10)).await.unwrap();
+    assert_eq!(with_dead.serving_replicas().await.len(), 3);
+
+    // Twelve robots tick every 10 ms until told to stop; every tick is answered once, in order.
+    let stop = Arc::new(AtomicBool::new(false));
+    let mut robots = Vec::new();
+    for robot in 0..12 {
+        let (client, stop) = (client.clone(), Arc::clone(&stop));
+        robots.push(tokio::spawn(async move {
+            let mut stream = client.track(model_ref("dubins4d", 0), 0.0).await.unwrap();
+            let mut seq = 0;
+            while !stop.load(Ordering::SeqCst) {
+                let reply = stream.tick(robot_tick(seq, robot)).await.unwrap();
+                assert_eq!((reply.seq, reply.error), (seq, None), "robot {robot}");
+                seq += 1;
+                tokio::time::sleep(Duration::from_millis(10)).await;
+            }
+            (stream.reopened(), stream.rebalanced())
+        }));
+    }
+    let counts = || client.stream_counts();
+    within(Duration::from_secs(10), "twelve streams open", || counts().iter().sum::<usize>() == 12).await;
+    assert_eq!(counts(), [4, 4, 4], "new streams go round-robin");
+
+    // A replica dies: its robots go on on the others.
+    let port: u16 = servers[0].endpoint.rsplit(':').next().unwrap().parse().unwrap();
+    servers[0].kill();
+    within(Duration::from_secs(10), "the dead replica's streams moved", || counts()[0] == 0).await;
+    assert_eq!(counts()[1] + counts()[2], 12);
+
+    // It comes back where it was: streams move to it, with nothing lost, until the load is even again.
+    servers[0] = TestServer::start_on(port, &models, &[]);
+    within(Duration::from_secs(30), "the load even again", || counts() == [4, 4, 4]).await;
+    stop.store(true, Ordering::SeqCst);
+    let (mut reopened, mut rebalanced) = (0, 0);
+    for robot in robots {
+        let (r, b) = robot.await.unwrap();
+        (reopened, rebalanced) = (reopened + r, rebalanced + b);
+    }
+    assert_eq!(reopened, 4, "the four robots of the dead replica moved once each");
+    assert!(rebalanced >= 4, "at least four streams moved back to the returned replica: {rebalanced}");
 }

@@ -208,7 +208,7 @@ def test_a_stream_no_replica_takes_fails_then_reopens_when_one_is_back(replicas:
             with pytest.raises(fastrack.FastrackError, match="recv\\(\\) without a tick"):
                 robot.recv()  # the tick that no replica took was dropped
             second.start().wait_serving()
-            client.wait_until_serving(timeout=10)  # the client's channel to it connected again
+            client.wait_until_serving(timeout=10, quorum=1)  # the client's channel to it connected again
             seq = robot.send(*robot_state(2, 0))  # the next tick opens the stream again
             assert robot.recv().seq == seq and robot.endpoint == second.address and robot.reopened == 1
 
@@ -223,7 +223,7 @@ async def test_an_async_stream_no_replica_takes_fails_then_reopens(replicas: lis
             with pytest.raises(fastrack.Unavailable, match="went away .*; no replica took the stream again"):
                 await robot.tick(*robot_state(1, 0))
             first.start().wait_serving()
-            await client.wait_until_serving(timeout=10)
+            await client.wait_until_serving(timeout=10, quorum=1)
             seq = await robot.send(*robot_state(2, 0))
             assert (await robot.recv()).seq == seq and robot.endpoint == first.address and robot.reopened == 1
 
@@ -232,7 +232,10 @@ def test_a_dead_address_beside_a_live_one(server: Server) -> None:
     dead = f"127.0.0.1:{free_port()}"
     with fastrack.Client(f"{dead}, http://{server.address}") as client:
         assert client.endpoints == [dead, server.address]
-        client.wait_until_serving(timeout=5)
+        with pytest.raises(fastrack.Unavailable, match=f"1 of 2 replicas .* SERVING after 0.3 s, 2 wanted \\(serving: {server.address}\\)"):
+            client.wait_until_serving(timeout=0.3)  # all of them, by default
+        client.wait_until_serving(timeout=5, quorum=1)
+        assert client.serving_replicas() == [server.address]
         for _ in range(4):
             assert client.get_model(MODEL).name == MODEL
         for _ in range(3):  # whichever replica is next, the stream opens on the live one
@@ -252,7 +255,10 @@ def test_a_dead_address_beside_a_live_one(server: Server) -> None:
 async def test_async_dead_address_beside_a_live_one(server: Server) -> None:
     dead = f"127.0.0.1:{free_port()}"
     async with fastrack.AsyncClient(f"{server.address},{dead}") as client:
-        await client.wait_until_serving(timeout=5)
+        with pytest.raises(fastrack.Unavailable, match="1 of 2 replicas .* SERVING after 0.3 s, 2 wanted"):
+            await client.wait_until_serving(timeout=0.3)
+        await client.wait_until_serving(timeout=5, quorum=1)
+        assert await client.serving_replicas() == [server.address]
         for _ in range(4):
             assert (await client.tracking_error_bound(MODEL, 1.0)).radius > 0
         for _ in range(3):
@@ -268,7 +274,7 @@ def test_only_dead_addresses_fail_clearly() -> None:
             client.list_models()
         with pytest.raises(fastrack.Unavailable, match="failed to connect"):
             client.track(MODEL)
-        with pytest.raises(fastrack.Unavailable, match=f"server {dead} not SERVING after 0.3 s"):
+        with pytest.raises(fastrack.Unavailable, match=f"0 of 1 replicas of {dead} SERVING after 0.3 s, 1 wanted"):
             client.wait_until_serving(timeout=0.3)
     with fastrack.Client(f"{dead},{dead_too}", retry=fastrack.Retry(attempts=2, initial_backoff=0.01)) as client:
         with pytest.raises(fastrack.Unavailable) as both:

@@ -19,7 +19,7 @@ from . import convert, results
 from .channel import DEFAULT_TIMEOUT_S, NO_RETRY, Retry, Settings, Tls
 from .client import HEALTH_CHECK
 from .errors import FastrackError, Unavailable, from_rpc_error
-from .replicas import Rotation, all_unavailable
+from .replicas import Rotation, all_unavailable, not_ready, replicas_wanted
 from .track import AsyncTrackStream, AsyncTrackStub
 from .v1 import models_pb2, models_pb2_grpc, safety_pb2, safety_pb2_grpc
 
@@ -110,20 +110,33 @@ class AsyncClient:
         reply = await self._unary(lambda r: r.health, request, timeout, idempotent=False)
         return health_pb2.HealthCheckResponse.ServingStatus.Name(reply.status)
 
-    async def wait_until_serving(self, timeout: float = 30.0) -> None:
-        """Polls health (the replicas in turn) until one is SERVING; raises :class:`Unavailable` after
-        ``timeout`` seconds."""
-        end = time.monotonic() + timeout
-        last = "no answer"
-        while True:
+    async def serving_replicas(self, *, timeout: float | None = None) -> list[str]:
+        """The endpoints of the replicas whose health is ``SERVING`` now (asked at once)."""
+        deadline = self.settings.timeout if timeout is None else timeout
+
+        async def serving(replica: AsyncReplica) -> bool:
             try:
-                last = await self.health(timeout=max(0.05, min(1.0, end - time.monotonic())))
-                if last == "SERVING":
-                    return
-            except Exception as e:  # noqa: BLE001 - any failure means "not yet"
-                last = str(e)
+                request = health_pb2.HealthCheckRequest()
+                reply = await replica.health(request, timeout=deadline, metadata=self.settings.metadata)
+            except grpc.RpcError:
+                return False
+            return reply.status == health_pb2.HealthCheckResponse.SERVING
+
+        replicas = self._replicas.replicas
+        answers = await asyncio.gather(*(serving(replica) for replica in replicas))
+        return [replica.endpoint for replica, ok in zip(replicas, answers) if ok]
+
+    async def wait_until_serving(self, timeout: float = 30.0, *, quorum: int | None = None) -> None:
+        """Polls every replica's health until all of them (or ``quorum`` of them, clamped to 1 .. the number of
+        replicas) are ``SERVING``; raises :class:`Unavailable` after ``timeout`` seconds, saying how many were."""
+        wanted = replicas_wanted(quorum, len(self._replicas.replicas))
+        end = time.monotonic() + timeout
+        while True:
+            serving = await self.serving_replicas(timeout=max(0.05, min(1.0, end - time.monotonic())))
+            if len(serving) >= wanted:
+                return
             if time.monotonic() >= end:
-                raise Unavailable(f"server {self.settings.address} not SERVING after {timeout} s (last: {last})")
+                raise not_ready(self.settings.address, serving, len(self._replicas.replicas), wanted, timeout)
             await asyncio.sleep(0.05)
 
     async def list_models(self, *, timeout: float | None = None) -> list[models_pb2.ModelInfo]:

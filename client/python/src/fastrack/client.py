@@ -15,7 +15,7 @@ from grpc_health.v1 import health_pb2
 from . import convert, results
 from .channel import DEFAULT_TIMEOUT_S, NO_RETRY, Retry, Settings, Tls
 from .errors import FastrackError, Unavailable, from_rpc_error
-from .replicas import Rotation, all_unavailable
+from .replicas import Rotation, all_unavailable, not_ready, replicas_wanted
 from .track import SyncTrackStub, TrackStream
 from .v1 import models_pb2, models_pb2_grpc, safety_pb2, safety_pb2_grpc
 
@@ -115,20 +115,30 @@ class Client:
         reply = self._unary(lambda r: r.health, request, timeout, idempotent=False)
         return health_pb2.HealthCheckResponse.ServingStatus.Name(reply.status)
 
-    def wait_until_serving(self, timeout: float = 30.0) -> None:
-        """Polls health (the replicas in turn) until one is SERVING; raises :class:`Unavailable` after
-        ``timeout`` seconds."""
-        end = time.monotonic() + timeout
-        last = "no answer"
-        while True:
+    def serving_replicas(self, *, timeout: float | None = None) -> list[str]:
+        """The endpoints of the replicas whose health is ``SERVING`` now (each asked once)."""
+        deadline = self.settings.timeout if timeout is None else timeout
+        serving = []
+        for replica in self._replicas.replicas:
             try:
-                last = self.health(timeout=max(0.05, min(1.0, end - time.monotonic())))
-                if last == "SERVING":
-                    return
-            except Exception as e:  # noqa: BLE001 - any failure means "not yet"
-                last = str(e)
+                reply = replica.health(health_pb2.HealthCheckRequest(), timeout=deadline, metadata=self.settings.metadata)
+            except grpc.RpcError:
+                continue
+            if reply.status == health_pb2.HealthCheckResponse.SERVING:
+                serving.append(replica.endpoint)
+        return serving
+
+    def wait_until_serving(self, timeout: float = 30.0, *, quorum: int | None = None) -> None:
+        """Polls every replica's health until all of them (or ``quorum`` of them, clamped to 1 .. the number of
+        replicas) are ``SERVING``; raises :class:`Unavailable` after ``timeout`` seconds, saying how many were."""
+        wanted = replicas_wanted(quorum, len(self._replicas.replicas))
+        end = time.monotonic() + timeout
+        while True:
+            serving = self.serving_replicas(timeout=max(0.05, min(1.0, end - time.monotonic())))
+            if len(serving) >= wanted:
+                return
             if time.monotonic() >= end:
-                raise Unavailable(f"server {self.settings.address} not SERVING after {timeout} s (last: {last})")
+                raise not_ready(self.settings.address, serving, len(self._replicas.replicas), wanted, timeout)
             time.sleep(0.05)
 
     def list_models(self, *, timeout: float | None = None) -> list[models_pb2.ModelInfo]:

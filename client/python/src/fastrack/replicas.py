@@ -69,3 +69,17 @@ def all_unavailable(failures: list[tuple[str, FastrackError]]) -> FastrackError:
     if len(failures) == 1:
         return failures[0][1]
     return Unavailable("no replica answered: " + "; ".join(f"{where}: {e.message}" for where, e in failures))
+
+
+def replicas_wanted(quorum: int | None, count: int) -> int:
+    """How many replicas a wait for ``quorum`` of ``count`` needs: all of them for None, else ``quorum``
+    clamped to 1 .. ``count``."""
+    return count if quorum is None else max(1, min(quorum, count))
+
+
+def not_ready(address: str, serving: list[str], count: int, wanted: int, timeout: float) -> Unavailable:
+    """The error of a wait that ended with fewer than ``wanted`` of ``count`` replicas ``SERVING``."""
+    return Unavailable(
+        f"{len(serving)} of {count} replicas of {address} SERVING after {timeout} s, {wanted} wanted"
+        f" (serving: {', '.join(serving) or 'none'})"
+    )
