@@ -9,6 +9,7 @@ import signal
 import threading
 import time
 from collections import Counter
+from collections.abc import Callable
 from dataclasses import dataclass, field
 
 import pytest
@@ -320,3 +321,85 @@ def test_a_replica_at_its_stream_limit_passes_new_streams_to_another(server: Ser
                 alone.track(MODEL)
     finally:
         full.stop()
+
+
+def within(limit_s: float, what: str, done: Callable[[], bool]) -> None:
+    """Polls ``done`` every 50 ms until it holds; fails after ``limit_s`` seconds, saying ``what``."""
+    end = time.monotonic() + limit_s
+    while not done():
+        assert time.monotonic() < end, f"{what} not within {limit_s} s"
+        time.sleep(0.05)
+
+
+def test_streams_spread_over_the_replicas_and_come_back_to_one_that_returns(replicas: list[Server]) -> None:
+    victim = replicas[0]
+    with fastrack.Client(",".join(r.address for r in replicas)) as client:
+        client.wait_until_serving(timeout=30)
+        at = client.endpoints.index(victim.address)
+        stop, lock = threading.Event(), threading.Lock()
+        moves: Counter[str] = Counter()
+        errors: list[BaseException] = []
+
+        def robot(i: int) -> None:
+            try:
+                with client.track(MODEL) as stream:
+                    seq = 0
+                    while not stop.is_set():
+                        assert stream.tick(*robot_state(seq, i)).seq == seq  # every tick answered once, in order
+                        seq += 1
+                        time.sleep(0.01)
+                    with lock:
+                        moves.update(reopened=stream.reopened, rebalanced=stream.rebalanced)
+            except BaseException as e:  # noqa: BLE001 - reported below
+                errors.append(e)
+
+        threads = [threading.Thread(target=robot, args=(i,)) for i in range(12)]
+        for thread in threads:
+            thread.start()
+        within(30, "twelve streams open", lambda: sum(client.stream_counts) == 12)
+        assert client.stream_counts == [4, 4, 4], "new streams go round-robin"
+        victim.stop(signal.SIGKILL)
+        within(30, "the dead replica's streams moved", lambda: client.stream_counts[at] == 0)
+        victim.start().wait_serving()
+        within(60, "the load even again", lambda: client.stream_counts == [4, 4, 4])
+        stop.set()
+        for thread in threads:
+            thread.join(timeout=30)
+        assert not errors, errors
+        assert moves["reopened"] == 4, moves
+        assert moves["rebalanced"] >= 4, moves
+        assert client.stream_counts == [0, 0, 0]
+
+
+async def test_async_streams_come_back_to_a_replica_that_returns(replicas: list[Server]) -> None:
+    victim = replicas[0]
+    async with fastrack.AsyncClient(",".join(r.address for r in replicas)) as client:
+        await client.wait_until_serving(timeout=30)
+        at = client.endpoints.index(victim.address)
+        stop = asyncio.Event()
+
+        async def robot(i: int) -> tuple[int, int]:
+            async with client.track(MODEL) as stream:
+                seq = 0
+                while not stop.is_set():
+                    assert (await stream.tick(*robot_state(seq, i))).seq == seq
+                    seq += 1
+                    await asyncio.sleep(0.01)
+                return stream.reopened, stream.rebalanced
+
+        async def until(limit_s: float, what: str, done: Callable[[], bool]) -> None:
+            end = time.monotonic() + limit_s
+            while not done():
+                assert time.monotonic() < end, f"{what} not within {limit_s} s: {client.stream_counts}"
+                await asyncio.sleep(0.05)
+
+        robots = [asyncio.create_task(robot(i)) for i in range(9)]
+        await until(30, "nine streams open", lambda: sum(client.stream_counts) == 9)
+        assert client.stream_counts == [3, 3, 3]
+        victim.stop(signal.SIGKILL)
+        await until(30, "the dead replica's streams moved", lambda: client.stream_counts[at] == 0)
+        await asyncio.to_thread(lambda: victim.start().wait_serving())
+        await until(60, "the load even again", lambda: client.stream_counts == [3, 3, 3])
+        stop.set()
+        moved = await asyncio.gather(*robots)
+        assert sum(r for r, _ in moved) == 3 and sum(b for _, b in moved) >= 3, moved

@@ -19,7 +19,7 @@ from . import convert, results
 from .channel import DEFAULT_TIMEOUT_S, NO_RETRY, Retry, Settings, Tls
 from .client import HEALTH_CHECK
 from .errors import FastrackError, Unavailable, from_rpc_error
-from .replicas import Rotation, all_unavailable, not_ready, replicas_wanted
+from .replicas import Rotation, StreamCounts, all_unavailable, not_ready, replicas_wanted
 from .track import AsyncTrackStream, AsyncTrackStub
 from .v1 import models_pb2, models_pb2_grpc, safety_pb2, safety_pb2_grpc
 
@@ -67,7 +67,13 @@ class AsyncClient:
         credentials = self.settings.credentials()
         replicas = [AsyncReplica(e.target, self.settings.aio_channel(e, credentials)) for e in endpoints]
         self._replicas = Rotation(replicas)
+        self._streams = StreamCounts(self.endpoints)
         self._dims: dict[tuple[str, int], convert.Dims] = {}
+
+    @property
+    def stream_counts(self) -> list[int]:
+        """This client's open ``Track`` streams on each replica, in the order of :attr:`endpoints`."""
+        return self._streams.counts()
 
     @property
     def endpoints(self) -> list[str]:
@@ -229,7 +235,7 @@ class AsyncClient:
         stream.close()``); :meth:`track` does both."""
         dims = await self.dims(model, version)
         open_request = convert.open_stream(model, version, idle_timeout)
-        return await AsyncTrackStream(self._track_stubs, self.settings.metadata, dims, open_request).open()
+        return await AsyncTrackStream(self._track_stubs, self._streams, self.settings.metadata, dims, open_request).open()
 
     def _track_stubs(self) -> list[tuple[str, AsyncTrackStub]]:
         return [(replica.endpoint, replica.safety.Track) for replica in self._replicas.rotation()]

@@ -15,7 +15,7 @@ from grpc_health.v1 import health_pb2
 from . import convert, results
 from .channel import DEFAULT_TIMEOUT_S, NO_RETRY, Retry, Settings, Tls
 from .errors import FastrackError, Unavailable, from_rpc_error
-from .replicas import Rotation, all_unavailable, not_ready, replicas_wanted
+from .replicas import Rotation, StreamCounts, all_unavailable, not_ready, replicas_wanted
 from .track import SyncTrackStub, TrackStream
 from .v1 import models_pb2, models_pb2_grpc, safety_pb2, safety_pb2_grpc
 
@@ -70,7 +70,13 @@ class Client:
         endpoints = self.settings.endpoints()
         credentials = self.settings.credentials()
         self._replicas = Rotation([Replica(e.target, self.settings.sync_channel(e, credentials)) for e in endpoints])
+        self._streams = StreamCounts(self.endpoints)
         self._dims: dict[tuple[str, int], convert.Dims] = {}
+
+    @property
+    def stream_counts(self) -> list[int]:
+        """This client's open ``Track`` streams on each replica, in the order of :attr:`endpoints`."""
+        return self._streams.counts()
 
     @property
     def endpoints(self) -> list[str]:
@@ -237,7 +243,7 @@ class Client:
         (see :mod:`fastrack.track`)."""
         dims = self.dims(model, version)
         open_request = convert.open_stream(model, version, idle_timeout)
-        return TrackStream(self._track_stubs, self.settings.metadata, dims, open_request)
+        return TrackStream(self._track_stubs, self._streams, self.settings.metadata, dims, open_request)
 
     def _track_stubs(self) -> list[tuple[str, SyncTrackStub]]:
         return [(replica.endpoint, replica.safety.Track) for replica in self._replicas.rotation()]

@@ -16,6 +16,7 @@ from __future__ import annotations
 
 import random
 import threading
+import time
 from collections.abc import Sequence
 from typing import Generic, TypeVar
 
@@ -52,6 +53,55 @@ class Rotation(Generic[T]):
             self._next = (start + 1) % len(self.replicas)
         count = len(self.replicas)
         return [self.replicas[(start + k) % count] for k in range(count)]
+
+
+BALANCE_EVERY_S = 1.0
+"""Least time between two looks of a ``Track`` stream at the balance of the replicas."""
+REFUSED_PAUSE_S = 5.0
+"""How long a replica that refused a stream is left out of balancing."""
+
+
+class StreamCounts:
+    """A client's open ``Track`` streams per replica, by which streams balance themselves over the replicas
+    that serve (a replica that returns gets its share back); thread-safe."""
+
+    def __init__(self, endpoints: Sequence[str]) -> None:
+        self.endpoints = tuple(endpoints)
+        self._open = dict.fromkeys(self.endpoints, 0)
+        self._refused: dict[str, float] = {}
+        self._lock = threading.Lock()
+
+    def counts(self) -> list[int]:
+        """Open streams per replica, in the order of the client's endpoints."""
+        with self._lock:
+            return [self._open[e] for e in self.endpoints]
+
+    def moved(self, old: str | None, new: str | None) -> None:
+        """Counts a stream opened on ``new`` (None: closed) that was on ``old`` (None: new)."""
+        with self._lock:
+            if old is not None:
+                self._open[old] -= 1
+            if new is not None:
+                self._open[new] += 1
+
+    def refused(self, endpoint: str) -> None:
+        """Remembers that ``endpoint`` refused a stream: balancing leaves it alone for a while."""
+        with self._lock:
+            self._refused[endpoint] = time.monotonic()
+
+    def lighter_than(self, endpoint: str) -> str | None:
+        """Where a stream on ``endpoint`` should move to even the load: the replica with the fewest of the
+        client's streams, if it has at least two fewer and has not refused a stream lately."""
+        now = time.monotonic()
+        with self._lock:
+            candidates = [
+                e for e in self.endpoints
+                if e != endpoint and now - self._refused.get(e, -REFUSED_PAUSE_S) >= REFUSED_PAUSE_S
+            ]
+            lightest = min(candidates, key=lambda e: self._open[e], default=None)
+            if lightest is None or self._open[lightest] + 2 > self._open.get(endpoint, 0):
+                return None
+            return lightest
 
 
 def replica_lost(error: FastrackError) -> bool:

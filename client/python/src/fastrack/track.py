@@ -19,6 +19,12 @@ the ticks still waiting are dropped, and the next ``send`` tries the replicas ag
 Nothing else needs carrying over: a reply depends on its tick alone, and the bound in force (``beta_old``)
 is the robot's own online loop's.
 
+For the same reason a stream moves when nothing is lost, to keep a client's streams spread over the replicas
+that serve: at most once a second, a stream on a replica holding at least two more of the client's streams
+than another opens a second stream there in the background (a thread, or a task), and moves to it at its
+next ``send`` with every earlier tick answered; so a replica that returns after a failure gets its share
+back, and the robot never waits for the move. ``rebalanced`` counts these moves.
+
 A stream is used by one thread (or task) at a time: ``send`` and ``recv`` may both move it.
 """
 
@@ -26,6 +32,8 @@ from __future__ import annotations
 
 import asyncio
 import queue
+import threading
+import time
 from collections import deque
 from collections.abc import Callable
 from types import TracebackType
@@ -37,7 +45,7 @@ import numpy.typing as npt
 
 from . import convert
 from .errors import FastrackError, Internal, Unavailable, from_rpc_error, from_status
-from .replicas import all_unavailable, replica_lost
+from .replicas import BALANCE_EVERY_S, StreamCounts, all_unavailable, replica_lost
 from .results import TrackReply
 from .v1 import safety_pb2
 
@@ -48,6 +56,25 @@ SyncReplicas: TypeAlias = "Callable[[], list[tuple[str, SyncTrackStub]]]"
 """The replicas to open a stream on, in the order to try them: ``(endpoint, Track stub)`` pairs."""
 AsyncReplicas: TypeAlias = "Callable[[], list[tuple[str, AsyncTrackStub]]]"
 Stub = TypeVar("Stub")
+
+
+class _SyncOpened:
+    """A sync stream open on one replica: its endpoint, the queue feeding its ticks and the call."""
+
+    def __init__(
+        self,
+        endpoint: str,
+        requests: queue.SimpleQueue[safety_pb2.TrackRequest | None],
+        call: grpc._CallIterator[safety_pb2.TrackResponse],
+    ) -> None:
+        self.endpoint, self.requests, self.call = endpoint, requests, call
+
+
+def _discard(opened: _SyncOpened | None) -> None:
+    """Ends a stream opened for a move that is not made."""
+    if opened is not None:
+        opened.requests.put(None)
+        opened.call.cancel()
 
 
 class _Sequence:
@@ -125,11 +152,13 @@ class TrackStream:
     def __init__(
         self,
         replicas: SyncReplicas,
+        counts: StreamCounts,
         metadata: tuple[tuple[str, str], ...],
         dims: convert.Dims,
         open_request: safety_pb2.TrackRequest,
     ) -> None:
         self._replicas = replicas
+        self._counts = counts
         self._metadata = metadata
         self._dims = dims
         self._open_request = open_request
@@ -141,8 +170,13 @@ class TrackStream:
         """How often the stream moved to another replica."""
         self.resent = 0
         """Ticks sent again after a move, because their first replica never answered them."""
+        self.rebalanced = 0
+        """How often the stream moved, with nothing lost, to even the load over the replicas."""
         self.endpoint = ""
         """The replica serving the stream now."""
+        self._balance_checked = time.monotonic()
+        self._move: list[_SyncOpened | None] | None = None
+        """A stream being opened in the background on a lighter replica: empty until the thread is done."""
         self._requests: queue.SimpleQueue[safety_pb2.TrackRequest | None] = queue.SimpleQueue()
         self._call: grpc._CallIterator[safety_pb2.TrackResponse] | None = None
         self._open_somewhere(None, raise_as_is=True)
@@ -155,26 +189,75 @@ class TrackStream:
         candidates = self._replicas()
         self._replica_count = len(candidates)
         for endpoint, stub in _order(candidates, lost):
-            requests: queue.SimpleQueue[safety_pb2.TrackRequest | None] = queue.SimpleQueue()
-            requests.put(self._open_request)
-            call = stub(iter(requests.get, None), metadata=self._metadata)
-            call.initial_metadata()  # the server answers the open with its headers, or ends the call
-            if not call.is_active():
-                requests.put(None)  # ends the thread feeding the call
-                error = from_status(call.code(), call.details() or "the Track stream ended at once")
-                if not _passed_over(error):
-                    raise error if raise_as_is else _no_replica(why, f"{endpoint}: {error.code.name}: {error.message}")
-                failures.append((endpoint, error))
+            opened = self._open_on(endpoint, stub)
+            if isinstance(opened, FastrackError):
+                if not _passed_over(opened):
+                    raise opened if raise_as_is else _no_replica(why, f"{endpoint}: {opened.code.name}: {opened.message}")
+                failures.append((endpoint, opened))
                 continue
             resend = self._sequence.requests()
             for request in resend:
-                requests.put(request)
-            self._requests, self._call, self.endpoint, self._lost = requests, call, endpoint, False
+                opened.requests.put(request)
+            self._switch(opened)
             if lost is not None:
                 self.reopened += 1
                 self.resent += len(resend)
             return
         raise _refused(why, failures, raise_as_is)
+
+    def _open_on(self, endpoint: str, stub: SyncTrackStub) -> _SyncOpened | FastrackError:
+        """Opens the stream on one replica: the open call, or the error it ended with at once."""
+        requests: queue.SimpleQueue[safety_pb2.TrackRequest | None] = queue.SimpleQueue()
+        requests.put(self._open_request)
+        call = stub(iter(requests.get, None), metadata=self._metadata)
+        call.initial_metadata()  # the server answers the open with its headers, or ends the call
+        if not call.is_active():
+            requests.put(None)  # ends the thread feeding the call
+            return from_status(call.code(), call.details() or "the Track stream ended at once")
+        return _SyncOpened(endpoint, requests, call)
+
+    def _switch(self, opened: _SyncOpened) -> None:
+        """Serves the stream from ``opened`` from now on, counting the move in the client's balance."""
+        self._counts.moved(self.endpoint or None, opened.endpoint)
+        self._requests, self._call, self.endpoint, self._lost = opened.requests, opened.call, opened.endpoint, False
+
+    def _balance(self) -> None:
+        """With every tick answered: moves to the stream opened in the background, if it is open; else, at most
+        once a second, starts opening one on a replica with at least two fewer of the client's streams."""
+        if self._sequence.pending:
+            return
+        if self._move is not None:
+            if self._move:
+                opened, self._move = self._move[0], None
+                if opened is not None:
+                    self._abandon()
+                    self._switch(opened)
+                    self.rebalanced += 1
+            return
+        if time.monotonic() - self._balance_checked < BALANCE_EVERY_S:
+            return
+        self._balance_checked = time.monotonic()
+        lighter = self._counts.lighter_than(self.endpoint)
+        stub = next((stub for endpoint, stub in self._replicas() if endpoint == lighter), None)
+        if lighter is None or stub is None:
+            return
+        move: list[_SyncOpened | None] = []
+
+        def open_there() -> None:
+            try:
+                opened = self._open_on(lighter, stub)
+            except (grpc.RpcError, ValueError) as e:  # a channel that broke or closed meanwhile
+                opened = Unavailable(f"{lighter}: {e}")
+            if isinstance(opened, FastrackError):
+                self._counts.refused(lighter)
+                move.append(None)
+            elif self._closed:
+                _discard(opened)  # the robot closed its stream meanwhile
+            else:
+                move.append(opened)
+
+        self._move = move
+        threading.Thread(target=open_there, name="fastrack-track-balance", daemon=True).start()
 
     def _reopen(self, why: str) -> None:
         """Moves the stream to another replica after ``why`` ended it; on failure drops the waiting ticks."""
@@ -216,6 +299,8 @@ class TrackStream:
             self._reopen("the stream's replica went away earlier")
         elif ended is not None and _movable(ended):
             self._reopen(_why(ended))
+        else:
+            self._balance()
         seq = self._sequence.add(request)
         self._requests.put(request)
         return seq
@@ -256,6 +341,9 @@ class TrackStream:
         if self._closed:
             return
         self._closed = True
+        self._counts.moved(self.endpoint or None, None)
+        if self._move:
+            _discard(self._move[0])
         self._requests.put(None)
         if self._call is None:
             return
@@ -281,11 +369,13 @@ class AsyncTrackStream:
     def __init__(
         self,
         replicas: AsyncReplicas,
+        counts: StreamCounts,
         metadata: tuple[tuple[str, str], ...],
         dims: convert.Dims,
         open_request: safety_pb2.TrackRequest,
     ) -> None:
         self._replicas = replicas
+        self._counts = counts
         self._metadata = metadata
         self._dims = dims
         self._open_request = open_request
@@ -297,8 +387,14 @@ class AsyncTrackStream:
         """How often the stream moved to another replica."""
         self.resent = 0
         """Ticks sent again after a move, because their first replica never answered them."""
+        self.rebalanced = 0
+        """How often the stream moved, with nothing lost, to even the load over the replicas."""
         self.endpoint = ""
         """The replica serving the stream now."""
+        self._balance_checked = time.monotonic()
+        self._move: asyncio.Task[tuple[str, TrackCall] | None] | None = None
+        """A stream being opened on a lighter replica, for the next move."""
+        self._closed = False
 
     @staticmethod
     async def _status(call: TrackCall, fallback: FastrackError | None = None) -> FastrackError:
@@ -313,33 +409,81 @@ class AsyncTrackStream:
         candidates = self._replicas()
         self._replica_count = len(candidates)
         for endpoint, stub in _order(candidates, lost):
-            call = stub(metadata=self._metadata)
             resend = self._sequence.requests()
-            try:
-                await call.write(self._open_request)
-                await call.initial_metadata()  # the server answers the open with its headers, or ends the call
-                if not call.done():
-                    for request in resend:
-                        await call.write(request)
-            except grpc.RpcError as e:
-                error: FastrackError | None = from_rpc_error(e)
-            except asyncio.InvalidStateError:
-                error = None
-            else:
-                error = None
-            if call.done():
-                error = await self._status(call, error)
+            call, error = await self._open_on(stub, resend)
             if error is None:
-                self._call, self.endpoint, self._lost = call, endpoint, False
+                self._switch(endpoint, call)
                 if lost is not None:
                     self.reopened += 1
                     self.resent += len(resend)
                 return
-            call.cancel()
             if not _passed_over(error):
                 raise error if raise_as_is else _no_replica(why, f"{endpoint}: {error.code.name}: {error.message}")
             failures.append((endpoint, error))
         raise _refused(why, failures, raise_as_is)
+
+    async def _open_on(
+        self, stub: AsyncTrackStub, resend: list[safety_pb2.TrackRequest]
+    ) -> tuple[TrackCall, FastrackError | None]:
+        """Opens the stream on one replica and sends ``resend`` there: the call, and the error it ended with
+        at once (None: open)."""
+        call = stub(metadata=self._metadata)
+        try:
+            await call.write(self._open_request)
+            await call.initial_metadata()  # the server answers the open with its headers, or ends the call
+            if not call.done():
+                for request in resend:
+                    await call.write(request)
+        except grpc.RpcError as e:
+            error: FastrackError | None = from_rpc_error(e)
+        except asyncio.InvalidStateError:
+            error = None
+        else:
+            error = None
+        if call.done():
+            error = await self._status(call, error)
+        if error is not None:
+            call.cancel()
+        return call, error
+
+    def _switch(self, endpoint: str, call: TrackCall) -> None:
+        """Serves the stream from ``call`` on ``endpoint`` from now on, counting the move in the balance."""
+        self._counts.moved(self.endpoint or None, endpoint)
+        self._call, self.endpoint, self._lost = call, endpoint, False
+
+    async def _balance(self) -> None:
+        """As :meth:`TrackStream._balance`, with a task instead of a thread."""
+        if self._sequence.pending:
+            return
+        if self._move is not None:
+            if self._move.done():
+                move, self._move = self._move, None
+                try:
+                    opened = move.result()
+                except (asyncio.CancelledError, grpc.RpcError, ValueError):
+                    opened = None  # no move: the stream stays where it is
+                if opened is not None:
+                    if self._call is not None:
+                        self._call.cancel()
+                    self._switch(*opened)
+                    self.rebalanced += 1
+            return
+        if time.monotonic() - self._balance_checked < BALANCE_EVERY_S:
+            return
+        self._balance_checked = time.monotonic()
+        lighter = self._counts.lighter_than(self.endpoint)
+        stub = next((stub for endpoint, stub in self._replicas() if endpoint == lighter), None)
+        if lighter is None or stub is None:
+            return
+
+        async def open_there(endpoint: str, stub: AsyncTrackStub) -> tuple[str, TrackCall] | None:
+            call, error = await self._open_on(stub, [])
+            if error is not None:
+                self._counts.refused(endpoint)
+                return None
+            return endpoint, call
+
+        self._move = asyncio.create_task(open_there(lighter, stub))
 
     async def _reopen(self, why: str) -> None:
         if self._call is not None:
@@ -378,6 +522,8 @@ class AsyncTrackStream:
             ended = await self._status(call)
             if _movable(ended):
                 await self._reopen(_why(ended))
+        else:
+            await self._balance()
         seq = self._sequence.add(request)
         try:
             await self._live_call().write(request)
@@ -433,8 +579,15 @@ class AsyncTrackStream:
         """Ends the stream: no more ticks; replies not yet read are dropped. Without ``cancel`` the server
         answers the ticks in flight and ends the call normally; with it the call is cancelled at once."""
         call = self._call
-        if call is None:
+        if call is None or self._closed:
             return
+        self._closed = True
+        self._counts.moved(self.endpoint or None, None)
+        if self._move is not None:
+            move, self._move = self._move, None
+            move.cancel()
+            if move.done() and not move.cancelled() and (opened := move.result()) is not None:
+                opened[1].cancel()
         if cancel or self._lost or call.done():
             call.cancel()
             return
