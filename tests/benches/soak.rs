@@ -170,10 +170,13 @@ async fn soak(minutes: usize) -> anyhow::Result<(Vec<Row>, Vec<String>, u64, u64
             p99_ms: p99_ms(&mut done.tick_latencies_us),
             errors: done.errors.len(),
         };
-        progress.println(format!(
-            "minute {minute}: RSS {:.1} MiB, {} streams open, {} ticks (p99 {:.2} ms), {} unary calls, {} errors",
-            row.rss_mib, row.open_streams, row.ticks, row.p99_ms, row.unary_calls, row.errors
-        ));
+        // Printed beside the bar, and also where there is no terminal to draw it on.
+        progress.suspend(|| {
+            println!(
+                "minute {minute}: RSS {:.1} MiB, {} streams open, {} ticks (p99 {:.2} ms), {} unary calls, {} errors",
+                row.rss_mib, row.open_streams, row.ticks, row.p99_ms, row.unary_calls, row.errors
+            )
+        });
         progress.inc(1);
         errors.extend(done.errors);
         rows.push(row);

@@ -233,11 +233,12 @@ async fn an_online_loop_keeps_its_bound_in_force_across_a_failover() {
     assert_eq!(survivor.metric("fastrack_active_streams").await, 1.0, "the stream moved to the other replica");
 }
 
-/// Polls `done` every 50 ms until it holds; fails after `limit`, saying `what`.
-async fn within(limit: Duration, what: &str, done: impl Fn() -> bool) {
+/// Polls `done` every 50 ms until it holds; fails after `limit`, saying `what` and the client's streams per
+/// replica.
+async fn within(limit: Duration, what: &str, client: &FastrackClient, done: impl Fn(&[usize]) -> bool) {
     let start = Instant::now();
-    while !done() {
-        assert!(start.elapsed() < limit, "{what} not within {limit:?}");
+    while !done(&client.stream_counts()) {
+        assert!(start.elapsed() < limit, "{what} not within {limit:?}: streams {:?}", client.stream_counts());
         tokio::time::sleep(Duration::from_millis(50)).await;
     }
 }
@@ -274,19 +275,17 @@ async fn streams_spread_over_the_replicas_that_serve_and_come_back_to_one_that_r
             (stream.reopened(), stream.rebalanced())
         }));
     }
-    let counts = || client.stream_counts();
-    within(Duration::from_secs(10), "twelve streams open", || counts().iter().sum::<usize>() == 12).await;
-    assert_eq!(counts(), [4, 4, 4], "new streams go round-robin");
+    within(Duration::from_secs(30), "twelve streams spread evenly", &client, |n| n == [4, 4, 4]).await;
 
     // A replica dies: its robots go on on the others.
     let port: u16 = servers[0].endpoint.rsplit(':').next().unwrap().parse().unwrap();
     servers[0].kill();
-    within(Duration::from_secs(10), "the dead replica's streams moved", || counts()[0] == 0).await;
-    assert_eq!(counts()[1] + counts()[2], 12);
+    within(Duration::from_secs(30), "the dead replica's streams moved", &client, |n| n[0] == 0).await;
+    assert_eq!(client.stream_counts()[1] + client.stream_counts()[2], 12);
 
     // It comes back where it was: streams move to it, with nothing lost, until the load is even again.
     servers[0] = TestServer::start_on(port, &models, &[]);
-    within(Duration::from_secs(30), "the load even again", || counts() == [4, 4, 4]).await;
+    within(Duration::from_secs(60), "the load even again", &client, |n| n == [4, 4, 4]).await;
     stop.store(true, Ordering::SeqCst);
     let (mut reopened, mut rebalanced) = (0, 0);
     for robot in robots {

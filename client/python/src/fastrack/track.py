@@ -58,6 +58,22 @@ AsyncReplicas: TypeAlias = "Callable[[], list[tuple[str, AsyncTrackStub]]]"
 Stub = TypeVar("Stub")
 
 
+class _BalancePace:
+    """When a stream looks at the balance of the replicas: at most once every ``BALANCE_EVERY_S``."""
+
+    def __init__(self) -> None:
+        self._checked = time.monotonic()
+
+    def target(self, counts: StreamCounts, replicas: list[tuple[str, Stub]], endpoint: str) -> tuple[str, Stub] | None:
+        """The replica (endpoint and stub) a stream on ``endpoint`` should move to, if it is time to look and
+        one has at least two fewer of the client's streams."""
+        if time.monotonic() - self._checked < BALANCE_EVERY_S:
+            return None
+        self._checked = time.monotonic()
+        lighter = counts.lighter_than(endpoint)
+        return next(((e, stub) for e, stub in replicas if e == lighter), None)
+
+
 class _SyncOpened:
     """A sync stream open on one replica: its endpoint, the queue feeding its ticks and the call."""
 
@@ -174,7 +190,7 @@ class TrackStream:
         """How often the stream moved, with nothing lost, to even the load over the replicas."""
         self.endpoint = ""
         """The replica serving the stream now."""
-        self._balance_checked = time.monotonic()
+        self._pace = _BalancePace()
         self._move: list[_SyncOpened | None] | None = None
         """A stream being opened in the background on a lighter replica: empty until the thread is done."""
         self._requests: queue.SimpleQueue[safety_pb2.TrackRequest | None] = queue.SimpleQueue()
@@ -234,13 +250,10 @@ class TrackStream:
                     self._switch(opened)
                     self.rebalanced += 1
             return
-        if time.monotonic() - self._balance_checked < BALANCE_EVERY_S:
+        target = self._pace.target(self._counts, self._replicas(), self.endpoint)
+        if target is None:
             return
-        self._balance_checked = time.monotonic()
-        lighter = self._counts.lighter_than(self.endpoint)
-        stub = next((stub for endpoint, stub in self._replicas() if endpoint == lighter), None)
-        if lighter is None or stub is None:
-            return
+        lighter, stub = target
         move: list[_SyncOpened | None] = []
 
         def open_there() -> None:
@@ -391,7 +404,7 @@ class AsyncTrackStream:
         """How often the stream moved, with nothing lost, to even the load over the replicas."""
         self.endpoint = ""
         """The replica serving the stream now."""
-        self._balance_checked = time.monotonic()
+        self._pace = _BalancePace()
         self._move: asyncio.Task[tuple[str, TrackCall] | None] | None = None
         """A stream being opened on a lighter replica, for the next move."""
         self._closed = False
@@ -468,12 +481,8 @@ class AsyncTrackStream:
                     self._switch(*opened)
                     self.rebalanced += 1
             return
-        if time.monotonic() - self._balance_checked < BALANCE_EVERY_S:
-            return
-        self._balance_checked = time.monotonic()
-        lighter = self._counts.lighter_than(self.endpoint)
-        stub = next((stub for endpoint, stub in self._replicas() if endpoint == lighter), None)
-        if lighter is None or stub is None:
+        target = self._pace.target(self._counts, self._replicas(), self.endpoint)
+        if target is None:
             return
 
         async def open_there(endpoint: str, stub: AsyncTrackStub) -> tuple[str, TrackCall] | None:
@@ -483,7 +492,7 @@ class AsyncTrackStream:
                 return None
             return endpoint, call
 
-        self._move = asyncio.create_task(open_there(lighter, stub))
+        self._move = asyncio.create_task(open_there(*target))
 
     async def _reopen(self, why: str) -> None:
         if self._call is not None:
