@@ -295,6 +295,16 @@ impl Repository {
         })
     }
 
+    /// The copy of `model`'s name and version loaded now, if it is another than `model` (the version was
+    /// reloaded since): a long-lived stream moves to it, so that a replaced copy is freed once its calls end
+    /// rather than kept for as long as the oldest stream lives. None while `model` is current, or when its
+    /// version is no longer loaded (the stream keeps what it has).
+    pub fn reloaded(&self, model: &Arc<LoadedModel>) -> Option<Arc<LoadedModel>> {
+        let models = self.read();
+        let current = &models.get(&model.manifest.name)?.get(&model.manifest.version)?.model;
+        (!Arc::ptr_eq(current, model)).then(|| Arc::clone(current))
+    }
+
     /// Every loaded version, with the default version of each model marked.
     pub fn list(&self) -> Vec<pb::ModelInfo> {
         let models = self.read();

@@ -136,3 +136,22 @@ async fn versions_are_swapped_under_load_without_a_failed_call() {
     assert!(tally.saw_v2.load(Ordering::Relaxed) > 0, "unary clients moved to version 2");
     assert!(server.log_text().contains("bundle rejected"));
 }
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stream_takes_up_a_reloaded_copy_of_its_version_at_its_next_tick() {
+    let repo = tempfile::tempdir().unwrap();
+    write_test_bundle(repo.path(), &dubins4d::system(), "dubins-test", 1, 1);
+    let (_server, client) = TestServer::start_observed(repo.path(), &["--poll-interval-s", "0"]).await;
+    let mut old = client.track(model_ref("dubins-test", 1), 0.0).await.unwrap();
+    let before = old.tick(robot_tick(0, 7)).await.unwrap();
+
+    // The version is replaced in place by another network and reloaded while the stream stays open.
+    write_test_bundle(repo.path(), &dubins4d::system(), "dubins-test", 1, 9);
+    assert!(client.reload_model("dubins-test").await.unwrap().iter().all(|o| o.loaded));
+    let after = old.tick(robot_tick(0, 7)).await.unwrap();
+    let mut fresh = client.track(model_ref("dubins-test", 1), 0.0).await.unwrap();
+    let reference = fresh.tick(robot_tick(0, 7)).await.unwrap();
+    assert!((before.value - after.value).abs() > 1e-4, "the old stream still answers from the replaced copy");
+    assert_eq!(after.value, reference.value, "the old stream answers as a stream opened after the reload");
+    assert_eq!(after.control, reference.control);
+}

@@ -31,7 +31,7 @@ pub const REPLY_BUFFER: usize = 64;
 
 /// What a stream needs from the server.
 pub struct StreamContext {
-    /// Model lookup at `open`.
+    /// Model lookup at `open`, and the current copy of the stream's version after a reload.
     pub repository: Arc<Repository>,
     /// The compute pool.
     pub scheduler: Arc<Scheduler>,
@@ -64,7 +64,8 @@ impl Drop for StreamGuard {
     }
 }
 
-/// Reads the opening message, resolves the model (the stream keeps that version for its lifetime) and
+/// Reads the opening message, resolves the model (the stream keeps that version for its lifetime, taking up
+/// a reloaded copy of it at its next tick) and
 /// spawns the tick loop. Errors before the first tick end the call with their status.
 pub async fn open(
     context: StreamContext,
@@ -133,7 +134,7 @@ pub async fn open(
 /// status: the server drains, no tick came for `idle`, the client went away or stopped reading.
 async fn tick_loop(
     mut context: StreamContext,
-    model: Arc<LoadedModel>,
+    mut model: Arc<LoadedModel>,
     mut inbound: Streaming<pb::TrackRequest>,
     tx: tokio::sync::mpsc::Sender<Result<pb::TrackResponse, Status>>,
     idle: Duration,
@@ -161,6 +162,10 @@ async fn tick_loop(
                 return Err(Status::cancelled("the client ended the stream"));
             }
             Ok(Some(Ok(pb::TrackRequest { msg: Some(Msg::Tick(tick)) }))) => {
+                // The stream keeps its version; a reload of that version is taken up at the next tick.
+                if let Some(current) = context.repository.reloaded(&model) {
+                    model = current;
+                }
                 answer(&context.scheduler, &model, tick).await
             }
             Ok(Some(Ok(_))) => pb::TrackReply {
