@@ -64,14 +64,15 @@ class _BalancePace:
     def __init__(self) -> None:
         self._checked = time.monotonic()
 
-    def target(self, counts: StreamCounts, replicas: list[tuple[str, Stub]], endpoint: str) -> tuple[str, Stub] | None:
+    def target(self, counts: StreamCounts, stubs: dict[str, Stub], endpoint: str) -> tuple[str, Stub] | None:
         """The replica (endpoint and stub) a stream on ``endpoint`` should move to, if it is time to look and
-        one has at least two fewer of the client's streams."""
+        one has at least two fewer of the client's streams. ``stubs`` are the client's, by endpoint: looking
+        must not turn the client's round-robin, which places new streams."""
         if time.monotonic() - self._checked < BALANCE_EVERY_S:
             return None
         self._checked = time.monotonic()
         lighter = counts.lighter_than(endpoint)
-        return next(((e, stub) for e, stub in replicas if e == lighter), None)
+        return None if lighter is None else (lighter, stubs[lighter])
 
 
 class _SyncOpened:
@@ -191,6 +192,7 @@ class TrackStream:
         self.endpoint = ""
         """The replica serving the stream now."""
         self._pace = _BalancePace()
+        self._stubs: dict[str, SyncTrackStub] = {}
         self._move: list[_SyncOpened | None] | None = None
         """A stream being opened in the background on a lighter replica: empty until the thread is done."""
         self._requests: queue.SimpleQueue[safety_pb2.TrackRequest | None] = queue.SimpleQueue()
@@ -203,7 +205,7 @@ class TrackStream:
         :class:`Unavailable` saying ``why`` the stream had to move."""
         failures: list[tuple[str, FastrackError]] = []
         candidates = self._replicas()
-        self._replica_count = len(candidates)
+        self._replica_count, self._stubs = len(candidates), dict(candidates)
         for endpoint, stub in _order(candidates, lost):
             opened = self._open_on(endpoint, stub)
             if isinstance(opened, FastrackError):
@@ -250,7 +252,7 @@ class TrackStream:
                     self._switch(opened)
                     self.rebalanced += 1
             return
-        target = self._pace.target(self._counts, self._replicas(), self.endpoint)
+        target = self._pace.target(self._counts, self._stubs, self.endpoint)
         if target is None:
             return
         lighter, stub = target
@@ -405,6 +407,7 @@ class AsyncTrackStream:
         self.endpoint = ""
         """The replica serving the stream now."""
         self._pace = _BalancePace()
+        self._stubs: dict[str, AsyncTrackStub] = {}
         self._move: asyncio.Task[tuple[str, TrackCall] | None] | None = None
         """A stream being opened on a lighter replica, for the next move."""
         self._closed = False
@@ -420,7 +423,7 @@ class AsyncTrackStream:
         """As :meth:`TrackStream._open_somewhere`."""
         failures: list[tuple[str, FastrackError]] = []
         candidates = self._replicas()
-        self._replica_count = len(candidates)
+        self._replica_count, self._stubs = len(candidates), dict(candidates)
         for endpoint, stub in _order(candidates, lost):
             resend = self._sequence.requests()
             call, error = await self._open_on(stub, resend)
@@ -481,7 +484,7 @@ class AsyncTrackStream:
                     self._switch(*opened)
                     self.rebalanced += 1
             return
-        target = self._pace.target(self._counts, self._replicas(), self.endpoint)
+        target = self._pace.target(self._counts, self._stubs, self.endpoint)
         if target is None:
             return
 
