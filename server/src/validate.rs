@@ -110,14 +110,21 @@ pub fn batch(
         n,
         // Periodic coordinates wrapped in double precision first: an angle the graph's single precision
         // cannot hold (1e300 rad, or one that loses its fraction) enters it as its residue.
-        states: states
-            .chunks(ns)
-            .flat_map(|item| item.iter().zip(&model.space.coordinates).map(|(&x, c)| c.wrapped(x) as f32))
-            .collect(),
+        states: wrapped_f32(states, &model.space.coordinates),
         params: params.iter().map(|&x| x as f32).collect(),
         in_domain,
         max_beta,
     })
+}
+
+/// `states` (row-major, one row per item) in single precision, each periodic coordinate wrapped into its
+/// period first; one allocation, sized up front (this runs on every request and tick).
+fn wrapped_f32(states: &[f64], coordinates: &[fastrack_valuefn::system::Coordinate]) -> Vec<f32> {
+    let mut out = Vec::with_capacity(states.len());
+    for item in states.chunks(coordinates.len()) {
+        out.extend(item.iter().zip(coordinates).map(|(&x, c)| c.wrapped(x) as f32));
+    }
+    out
 }
 
 /// Checks `d_obs` (absent is allowed).

@@ -65,8 +65,8 @@ impl Drop for StreamGuard {
 }
 
 /// Reads the opening message, resolves the model (the stream keeps that version for its lifetime, taking up
-/// a reloaded copy of it at its next tick) and
-/// spawns the tick loop. Errors before the first tick end the call with their status.
+/// a reloaded copy of it at its next tick) and spawns the tick loop. Errors before the first tick end the
+/// call with their status.
 pub async fn open(
     context: StreamContext,
     mut inbound: Streaming<pb::TrackRequest>,
