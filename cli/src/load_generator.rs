@@ -1,5 +1,5 @@
 //! Load generator: closed-loop clients driving a server with unary `TrackingControl` batches or `Track`
-//! ticks, and the in-process ceiling (the same bundle evaluated through ONNX Runtime in this process).
+//! ticks.
 //!
 //! Every concurrent client keeps one request (or one tick) outstanding: it sends, awaits the answer and
 //! sends again. Clients share `min(concurrency, 64)` connections round-robin (one HTTP/2 connection
@@ -25,19 +25,16 @@
 //! ```
 
 use fastrack_client::{pb, ClientError, ClientOptions, FastrackClient};
-use fastrack_valuefn::bundle::Bundle;
-use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
 use indicatif::ProgressBar;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use serde_json::{json, Value};
 use std::collections::HashMap;
-use std::path::PathBuf;
 use std::sync::atomic::{AtomicU64, Ordering};
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 
-/// Why a load run or the in-process ceiling cannot run.
+/// Why a load run cannot run.
 #[derive(Debug, thiserror::Error)]
 pub enum LoadError {
     /// Connecting to the server or describing the model failed.
@@ -46,21 +43,13 @@ pub enum LoadError {
     /// A bad spec, or a model description the run cannot draw inputs from.
     #[error("load run: {0}")]
     InvalidLoad(String),
-    /// The in-process evaluation of a bundle failed (bundle, ONNX Runtime library or inference).
-    #[error("in-process evaluation of {}: {reason}", bundle.display())]
-    InProcess {
-        /// The bundle's version folder.
-        bundle: PathBuf,
-        /// What went wrong.
-        reason: String,
-    },
 }
 
 /// Most connections a run opens; more concurrent clients share them round-robin.
 pub const MAX_CONNECTIONS: usize = 64;
 
 /// Distinct request payloads each unary client cycles through (generated before the clock starts).
-const PAYLOADS_PER_CLIENT: usize = 8;
+pub const PAYLOADS_PER_CLIENT: usize = 8;
 
 /// Fraction of each non-periodic state interval kept clear at both ends, so that rounding never puts a
 /// sampled state outside the domain.
@@ -208,7 +197,8 @@ impl LoadReport {
     }
 }
 
-fn per_second(count: u64, elapsed: Duration) -> f64 {
+/// `count` per second of `elapsed` (0 for no time).
+pub fn per_second(count: u64, elapsed: Duration) -> f64 {
     if elapsed.is_zero() {
         0.0
     } else {
@@ -219,7 +209,7 @@ fn per_second(count: u64, elapsed: Duration) -> f64 {
 /// Where random inputs are drawn from: the state box (margins kept clear, periodic axes whole) and the
 /// parameter ranges.
 #[derive(Debug, Clone)]
-struct InputDomain {
+pub struct InputDomain {
     /// Per state coordinate: `(min, max)` to draw from.
     state: Vec<(f64, f64)>,
     /// Per parameter: `[beta_l, beta_u]`.
@@ -228,7 +218,7 @@ struct InputDomain {
 
 impl InputDomain {
     /// From bounds `(min, max, periodic)` and parameter ranges; `what` names the source in errors.
-    fn new(
+    pub fn new(
         state: impl IntoIterator<Item = (f64, f64, bool)>,
         params: impl IntoIterator<Item = (f64, f64)>,
         what: &str,
@@ -286,7 +276,7 @@ impl InputDomain {
     }
 
     /// `batch` random items: `(states, params)`, row-major.
-    fn batch(&self, rng: &mut StdRng, batch: usize) -> (Vec<f64>, Vec<f64>) {
+    pub fn batch(&self, rng: &mut StdRng, batch: usize) -> (Vec<f64>, Vec<f64>) {
         let mut states = Vec::with_capacity(batch * self.state.len());
         let mut params = Vec::with_capacity(batch * self.params.len());
         for _ in 0..batch {
@@ -569,127 +559,6 @@ pub async fn run_load(
         errors,
         elapsed: last_finish - measure_from,
         latency: LatencySummary::from_latencies(&mut latencies),
-    })
-}
-
-/// The in-process ceiling: a bundle evaluated through ONNX Runtime in this process, no network.
-#[derive(Debug, Clone, PartialEq)]
-pub struct InProcessSpec {
-    /// The bundle's version folder, `<repository>/<name>/<version>`.
-    pub bundle_dir: PathBuf,
-    /// Items per evaluation (at least 1).
-    pub batch: usize,
-    /// Threads evaluating at once, one ONNX Runtime session each (at least 1).
-    pub threads: usize,
-    /// Measured time, after the warm-up.
-    pub duration: Duration,
-    /// Time the threads run before measuring starts.
-    pub warmup: Duration,
-    /// The ONNX Runtime library; `None`: `$FASTRACK_ORT_LIB`, then the project's `.cache/onnxruntime`.
-    pub ort_lib: Option<PathBuf>,
-    /// Seed of the random inputs.
-    pub seed: u64,
-}
-
-/// What the in-process run measured.
-#[derive(Debug, Clone, PartialEq)]
-pub struct InProcessReport {
-    /// Items per evaluation.
-    pub batch: usize,
-    /// Threads (and ONNX Runtime sessions).
-    pub threads: usize,
-    /// Evaluations started after the warm-up.
-    pub evaluations: u64,
-    /// Items those evaluations covered.
-    pub items: u64,
-    /// Measured wall time.
-    pub elapsed: Duration,
-}
-
-impl InProcessReport {
-    /// Evaluated items per second.
-    pub fn items_per_s(&self) -> f64 {
-        per_second(self.items, self.elapsed)
-    }
-
-    /// Evaluations (calls) per second.
-    pub fn evaluations_per_s(&self) -> f64 {
-        per_second(self.evaluations, self.elapsed)
-    }
-
-    /// The report as JSON.
-    pub fn to_json(&self) -> Value {
-        json!({"batch": self.batch, "threads": self.threads, "evaluations": self.evaluations, "items": self.items,
-               "elapsed_s": self.elapsed.as_secs_f64(), "items_per_s": self.items_per_s(),
-               "evaluations_per_s": self.evaluations_per_s()})
-    }
-}
-
-/// Evaluates the bundle at `spec.bundle_dir` on `spec.threads` threads, `spec.batch` random in-domain items
-/// per call, for the warm-up and then the measured time. Blocks the calling thread: from async code, call
-/// it through `tokio::task::spawn_blocking`.
-pub fn run_in_process(spec: &InProcessSpec) -> Result<InProcessReport, LoadError> {
-    let fail = |reason: String| LoadError::InProcess { bundle: spec.bundle_dir.clone(), reason };
-    if spec.batch == 0 || spec.threads == 0 {
-        return Err(fail("batch and threads must be at least 1".into()));
-    }
-    let bundle = Bundle::load(&spec.bundle_dir).map_err(|e| fail(e.to_string()))?;
-    let m = &bundle.manifest;
-    let domain = InputDomain::new(
-        m.state.iter().map(|d| (d.min, d.max, d.periodic)),
-        m.params.iter().map(|p| (p.min, p.max)),
-        &format!("bundle {}", spec.bundle_dir.display()),
-    )?;
-    let dims = GraphDims::of(m);
-    let rt = runtime(spec.ort_lib.as_deref()).map_err(|e| fail(e.to_string()))?;
-    let evaluator = Evaluator::new(rt, &bundle.onnx, dims, spec.threads).map_err(|e| fail(e.to_string()))?;
-    let start = Instant::now();
-    let window = Window { measure_from: start + spec.warmup, end: start + spec.warmup + spec.duration };
-    let per_thread = std::thread::scope(|scope| {
-        let handles: Vec<_> = (0..spec.threads)
-            .map(|t| {
-                let mut rng = StdRng::seed_from_u64(spec.seed.wrapping_add(t as u64));
-                let payloads: Vec<(Vec<f32>, Vec<f32>)> = (0..PAYLOADS_PER_CLIENT)
-                    .map(|_| {
-                        let (s, p) = domain.batch(&mut rng, spec.batch);
-                        (s.iter().map(|&x| x as f32).collect(), p.iter().map(|&x| x as f32).collect())
-                    })
-                    .collect();
-                let evaluator = &evaluator;
-                scope.spawn(move || -> Result<(u64, Instant), String> {
-                    let (mut count, mut last) = (0u64, window.measure_from);
-                    for (s, p) in payloads.iter().cycle() {
-                        let started = Instant::now();
-                        if started >= window.end {
-                            break;
-                        }
-                        std::hint::black_box(evaluator.evaluate(s, p).map_err(|e| e.to_string())?);
-                        if started >= window.measure_from {
-                            count += 1;
-                            last = Instant::now();
-                        }
-                    }
-                    Ok((count, last))
-                })
-            })
-            .collect();
-        handles
-            .into_iter()
-            .map(|h| h.join().unwrap_or_else(|_| Err("an evaluation thread panicked".into())))
-            .collect::<Vec<_>>()
-    });
-    let (mut evaluations, mut last) = (0u64, window.measure_from);
-    for result in per_thread {
-        let (count, finished) = result.map_err(fail)?;
-        evaluations += count;
-        last = last.max(finished);
-    }
-    Ok(InProcessReport {
-        batch: spec.batch,
-        threads: spec.threads,
-        evaluations,
-        items: evaluations * spec.batch as u64,
-        elapsed: last - window.measure_from,
     })
 }
 

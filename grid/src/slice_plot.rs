@@ -1,5 +1,5 @@
 //! PNG figures (plotters, bitmap backend): side-by-side value-function slices. Line charts come from
-//! `fastrack_valuefn::plot`, which also registers the label font.
+//! `fastrack_lab::plot`, which also registers the label font.
 //!
 //! Text needs a font: plotters' pure-Rust `ab_glyph` renderer is given DejaVu Sans (or Liberation Sans)
 //! from the system font folders when one is installed; without one, figures are drawn without text (axes,
@@ -38,7 +38,7 @@ pub fn slice_pair(
     n1: usize,
     level: f64,
 ) -> Result<(), PlotError> {
-    let text = fastrack_valuefn::plot::fonts_available();
+    let text = fastrack_lab::plot::fonts_available();
     let (lo, hi) = panels
         .iter()
         .flat_map(|(_, v)| v.iter())

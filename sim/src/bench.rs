@@ -4,8 +4,8 @@
 //! writing a [`BenchPart`]; merged, the parts give the runs a single process gives.
 
 use crate::episode::{Outcome, Run};
-use fastrack_valuefn::record::MarkdownTable;
-use fastrack_valuefn::shard::Part;
+use fastrack_lab::record::MarkdownTable;
+use fastrack_lab::shard::Part;
 use serde::{Deserialize, Serialize};
 use serde_json::{json, Value};
 use std::time::Duration;

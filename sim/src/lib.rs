@@ -6,6 +6,8 @@
 //! relative states the online loop visited ([`visits`]), its golden traces ([`trace`]) and the figures
 //! ([`plot`]).
 
+#![warn(missing_docs)]
+
 pub mod backend;
 pub mod bench;
 pub mod episode;

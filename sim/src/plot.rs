@@ -4,8 +4,8 @@
 
 use crate::episode::Run;
 use crate::world::World;
+use fastrack_lab::plot::{fonts_available, line_chart, Chart, Series};
 use fastrack_online::geometry::{Obstacle, Point};
-use fastrack_valuefn::plot::{fonts_available, line_chart, Chart, Series};
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::path::Path;

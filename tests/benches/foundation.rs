@@ -8,9 +8,9 @@
 use anyhow::Context;
 use fastrack_client::{model_ref, pb};
 use fastrack_e2e::{write_network_bundle, TestServer, TEST_HORIZON};
+use fastrack_lab::record::{write_record, MarkdownTable};
 use fastrack_valuefn::network::{NetworkShape, ValueNetwork};
 use fastrack_valuefn::onnx_writer::write_value_graph;
-use fastrack_valuefn::record::{write_record, MarkdownTable};
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
 use fastrack_valuefn::system::dubins4d;
 use ort::session::builder::GraphOptimizationLevel;

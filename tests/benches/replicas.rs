@@ -12,7 +12,7 @@
 use fastrack_cli::load_generator::{run_load, LoadSpec, Workload};
 use fastrack_client::{model_ref, ClientOptions, FastrackClient};
 use fastrack_e2e::{robot_tick, TestServer};
-use fastrack_valuefn::record::{write_record, MarkdownTable};
+use fastrack_lab::record::{write_record, MarkdownTable};
 use serde_json::json;
 use std::path::Path;
 use std::sync::{Arc, Mutex};

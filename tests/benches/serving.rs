@@ -7,12 +7,11 @@
 //! Run: `bash scripts/bench.sh` (builds the release binaries first; this bench does not build the server).
 
 use anyhow::Context;
-use fastrack_cli::load_generator::{
-    run_in_process, run_load, InProcessReport, InProcessSpec, LoadReport, LoadSpec, Workload,
-};
+use fastrack_cli::load_generator::{run_load, LoadReport, LoadSpec, Workload};
 use fastrack_client::{model_ref, ClientOptions};
+use fastrack_e2e::ceiling::{run_in_process, InProcessReport, InProcessSpec};
 use fastrack_e2e::TestServer;
-use fastrack_valuefn::record::{write_record, MarkdownTable};
+use fastrack_lab::record::{write_record, MarkdownTable};
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::time::Duration;

@@ -7,12 +7,12 @@
 //! simulator are optimised).
 
 use fastrack_e2e::TestServer;
+use fastrack_lab::record::{write_record, MarkdownTable};
 use fastrack_sim::backend::Backend;
 use fastrack_sim::episode::{Run, RunSettings, Simulator};
 use fastrack_sim::in_process::LocalModel;
 use fastrack_sim::methods::Method;
 use fastrack_sim::world::{World, WorldSpec};
-use fastrack_valuefn::record::{write_record, MarkdownTable};
 use serde_json::json;
 use std::path::Path;
 use std::time::Instant;

@@ -11,8 +11,8 @@
 
 use fastrack_client::{model_ref, ClientOptions, FastrackClient};
 use fastrack_e2e::{robot_tick, TestServer};
-use fastrack_valuefn::plot::{line_chart, Chart, Series};
-use fastrack_valuefn::record::{write_record, MarkdownTable};
+use fastrack_lab::plot::{line_chart, Chart, Series};
+use fastrack_lab::record::{write_record, MarkdownTable};
 use rand::{Rng, SeedableRng};
 use serde_json::json;
 use std::path::{Path, PathBuf};

@@ -224,7 +224,7 @@ impl Tally {
     pub fn report(&self) {
         eprintln!("{}: accepted / refused per kind: {:?}", self.target, self.outcomes);
         let Ok(name) = std::env::var("FASTRACK_FUZZ_RECORD") else { return };
-        let mut table = fastrack_valuefn::record::MarkdownTable::new(&["kind", "accepted", "refused"]);
+        let mut table = fastrack_lab::record::MarkdownTable::new(&["kind", "accepted", "refused"]);
         for (kind, (accepted, refused)) in &self.outcomes {
             table.row(vec![kind.clone(), accepted.to_string(), refused.to_string()]);
         }
@@ -242,7 +242,7 @@ impl Tally {
             "outcomes": self.outcomes.iter().map(|(k, (a, r))| (k.clone(), serde_json::json!([a, r]))).collect::<serde_json::Map<_, _>>(),
         });
         let config = serde_json::json!({ "target": self.target, "cases_per_property": self.cases });
-        fastrack_valuefn::record::write_record(&dir, &record, &command, config, figures, &[("outcomes", &table)])
+        fastrack_lab::record::write_record(&dir, &record, &command, config, figures, &[("outcomes", &table)])
             .expect("write the fuzz record");
     }
 }

@@ -2,6 +2,7 @@
 //! `fastrack-server` binary on a free loopback port, connects the client library, and stops the server
 //! (checking that it never panicked) at the end.
 
+pub mod ceiling;
 pub mod fuzz;
 
 use fastrack_client::{ClientOptions, FastrackClient};

@@ -1,6 +1,7 @@
 //! The workspace's dependency rules (docs/architecture.md), checked against `Cargo.lock` and the crates'
 //! manifests: a robot's client links no ONNX Runtime, `clap` or `indicatif`; the server no trainer, solver
-//! or solution-file code; the shared crate no gRPC; the trainer the solution file, not the solver.
+//! or solution-file code; neither links the lab tooling (records, shards, plots); the `fastrack` CLI no ONNX
+//! Runtime; the shared crate no gRPC and no lab tooling; the trainer the solution file, not the solver.
 
 use std::collections::{BTreeSet, HashMap};
 use std::path::PathBuf;
@@ -62,6 +63,36 @@ fn the_client_library_links_only_what_a_robot_needs() {
 #[test]
 fn the_server_knows_no_trainer_or_solver() {
     assert_excludes(&lock(), "fastrack-server", &["fastrack-trainer", "fastrack-grid", "fastrack-gridfile", "burn"]);
+}
+
+#[test]
+fn neither_the_server_nor_the_client_links_the_lab_tooling() {
+    let lock = lock();
+    for package in ["fastrack-server", "fastrack-client", "fastrack-online"] {
+        assert_excludes(&lock, package, &["fastrack-lab", "plotters"]);
+    }
+    assert_excludes(&lock, "fastrack-valuefn", &["fastrack-lab", "plotters"]);
+    assert!(closure(&lock, "fastrack-grid").contains("fastrack-lab"), "the rule names the crate the tools use");
+}
+
+/// What `package` links as built on its own (its normal dependencies with the features it enables), from
+/// `cargo tree`: `Cargo.lock` also lists optional dependencies that only another member's features turn on.
+fn linked(package: &str) -> BTreeSet<String> {
+    let out = std::process::Command::new(env!("CARGO"))
+        .args(["tree", "--offline", "-p", package, "-e", "normal", "--prefix", "none", "-f", "{p}"])
+        .current_dir(repository())
+        .output()
+        .expect("cargo tree runs");
+    assert!(out.status.success(), "cargo tree: {}", String::from_utf8_lossy(&out.stderr));
+    String::from_utf8_lossy(&out.stdout).lines().filter_map(|l| l.split_whitespace().next().map(String::from)).collect()
+}
+
+#[test]
+fn the_command_line_links_no_onnx_runtime() {
+    let linked = linked("fastrack-cli");
+    let found: Vec<&str> = ["ort", "ort-sys", "libloading"].into_iter().filter(|f| linked.contains(*f)).collect();
+    assert!(found.is_empty(), "fastrack-cli links {found:?}");
+    assert!(linked.contains("fastrack-client") && linked.contains("fastrack-sim"), "{linked:?}");
 }
 
 #[test]

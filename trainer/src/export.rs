@@ -3,6 +3,7 @@
 //! the served value against the f64 model before declaring success.
 
 use anyhow::{ensure, Context};
+use fastrack_lab::provenance::{machine_description, source_revision, utc_now_rfc3339};
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::composite::Composite;
 use fastrack_valuefn::manifest::{Manifest, NetworkInfo, Provenance, SystemInfo, SCHEMA_VERSION};
@@ -12,6 +13,7 @@ use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
 use fastrack_valuefn::system::AffineSystem;
 use fastrack_valuefn::teb::{teb_table, TebOptions};
 use rand::{Rng, SeedableRng};
+use std::collections::BTreeMap;
 use std::path::{Path, PathBuf};
 
 /// The value function a bundle serves.
@@ -171,4 +173,24 @@ fn check_reload(dir: &Path, model: &ExportedModel<'_>, system: &AffineSystem, di
         "bundle reloaded and checked"
     );
     Ok(())
+}
+
+/// Provenance of a model made now, on this machine, from this source revision.
+pub fn provenance_here_and_now(
+    method: impl Into<String>,
+    config: serde_json::Value,
+    iterations: u64,
+    final_losses: BTreeMap<String, f64>,
+    wall_time_s: f64,
+) -> Provenance {
+    Provenance {
+        method: method.into(),
+        config,
+        iterations,
+        final_losses,
+        wall_time_s,
+        machine: machine_description(),
+        source_revision: source_revision(),
+        created: utc_now_rfc3339(),
+    }
 }

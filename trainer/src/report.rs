@@ -2,8 +2,8 @@
 
 use crate::train::RunDir;
 use anyhow::Context;
+use fastrack_lab::plot::{line_chart, Chart, Series};
 use fastrack_valuefn::manifest::TebRow;
-use fastrack_valuefn::plot::{line_chart, Chart, Series};
 use std::path::{Path, PathBuf};
 
 /// Draws `<run>/losses.png` (total, boundary, residual and grid-supervision losses against iteration, log

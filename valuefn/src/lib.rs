@@ -4,29 +4,22 @@
 //! - [`network`]: the SIREN value network and its f64 reference evaluation.
 //! - [`composite`]: axis networks of a decomposed system (quad10d) combined into one value function.
 //! - [`manifest`], [`bundle`]: the model bundle format and repository layout.
-//! - [`provenance`]: machine, revision and time stamps for manifests and bench records.
-//! - [`record`]: measurement records under `bench/results/`.
 //! - [`teb`]: TEB tables from a value function (`V_min` per `beta`, extent, boundary).
 //! - [`simulation`]: RK4 with held inputs and the planner models every rollout shares.
-//! - [`shard`]: `--shard INDEX/COUNT` for batch work split among processes (Kubernetes Indexed Jobs).
 //! - `onnx_writer` (feature `writer`): the network plus control law as an ONNX graph.
-//! - `plot` (feature `plot`): PNG line charts.
 //! - `runtime` (feature `runtime`): ONNX Runtime loading and a pooled batch evaluator.
+
+#![warn(missing_docs)]
 
 pub mod bundle;
 pub mod composite;
 pub mod manifest;
 pub mod network;
-pub mod provenance;
-pub mod record;
-pub mod shard;
 pub mod simulation;
 pub mod system;
 pub mod teb;
 
 #[cfg(feature = "writer")]
 pub mod onnx_writer;
-#[cfg(feature = "plot")]
-pub mod plot;
 #[cfg(feature = "runtime")]
 pub mod runtime;

@@ -335,28 +335,6 @@ pub struct Provenance {
     pub created: String,
 }
 
-impl Provenance {
-    /// Provenance of a model made now, on this machine, from this source revision.
-    pub fn here_and_now(
-        method: impl Into<String>,
-        config: serde_json::Value,
-        iterations: u64,
-        final_losses: BTreeMap<String, f64>,
-        wall_time_s: f64,
-    ) -> Self {
-        Self {
-            method: method.into(),
-            config,
-            iterations,
-            final_losses,
-            wall_time_s,
-            machine: crate::provenance::machine_description(),
-            source_revision: crate::provenance::source_revision(),
-            created: crate::provenance::utc_now_rfc3339(),
-        }
-    }
-}
-
 /// Directions of [`TebRow::boundary_radii`] for an error space of `n_error` dimensions: `±1` in 1-D,
 /// `count` equally spaced angles from 0 (counter-clockwise) in 2-D, none otherwise.
 pub fn boundary_directions(n_error: usize, count: usize) -> Vec<Vec<f64>> {

@@ -1,15 +1,11 @@
-//! `fastrack load`: the load generator against a server, and optionally the in-process ceiling.
+//! `fastrack load`: the load generator against a server (the serving bench adds the in-process ceiling).
 
 use super::{print, seconds, Server};
-use anyhow::Context;
 use clap::ValueEnum;
-use fastrack_cli::load_generator::{
-    run_in_process, run_load, InProcessReport, InProcessSpec, LoadReport, LoadSpec, Workload,
-};
+use fastrack_cli::load_generator::{run_load, LoadReport, LoadSpec, Workload};
 use fastrack_client::model_ref;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
-use std::path::PathBuf;
 use std::time::Duration;
 
 /// What the load generator's clients send.
@@ -48,19 +44,9 @@ pub struct Args {
     /// Seed of the random inputs.
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// Also evaluate this bundle folder (<repository>/<name>/<version>) in-process through ONNX Runtime, as
-    /// many threads as cores at the same batch size, and print the server's throughput relative to it.
-    #[arg(long)]
-    in_process: Option<PathBuf>,
-    /// Threads of the in-process evaluation (default: the number of cores).
-    #[arg(long, requires = "in_process", value_parser = clap::value_parser!(u32).range(1..))]
-    in_process_threads: Option<u32>,
-    /// ONNX Runtime library for --in-process (default: $FASTRACK_ORT_LIB, then .cache/onnxruntime).
-    #[arg(long, requires = "in_process")]
-    ort_lib: Option<PathBuf>,
 }
 
-/// `fastrack load`: one run per concurrency, then the in-process ceiling if asked; a table or JSON.
+/// `fastrack load`: one run per concurrency; a table or JSON.
 pub async fn run(server: &Server, args: Args, json_mode: bool) -> anyhow::Result<()> {
     let workload = match args.workload {
         WorkloadArg::Unary => Workload::Unary { batch: args.batch as usize },
@@ -80,33 +66,6 @@ pub async fn run(server: &Server, args: Args, json_mode: bool) -> anyhow::Result
         let bar = ProgressBar::new(0).with_style(style.clone()).with_prefix(format!("concurrency {concurrency}"));
         reports.push(run_load(&server.address, &server.options, &spec, Some(bar)).await?);
     }
-    let ceiling = match args.in_process {
-        Some(bundle_dir) => {
-            let threads = match args.in_process_threads {
-                Some(t) => t as usize,
-                None => std::thread::available_parallelism().map_or(1, |n| n.get()),
-            };
-            let spec = InProcessSpec {
-                bundle_dir,
-                batch: workload.items_per_request(),
-                threads,
-                duration: args.duration_s,
-                warmup: args.warmup_s,
-                ort_lib: args.ort_lib,
-                seed: args.seed,
-            };
-            let spinner =
-                ProgressBar::new_spinner().with_message(format!("in-process: {threads} threads, batch {}", spec.batch));
-            spinner.enable_steady_tick(Duration::from_millis(100));
-            let report = tokio::task::spawn_blocking(move || run_in_process(&spec))
-                .await
-                .context("the in-process evaluation thread failed")??;
-            spinner.finish_and_clear();
-            Some(report)
-        }
-        None => None,
-    };
-    let ratio = |r: &LoadReport| ceiling.as_ref().map(|c| r.items_per_s() / c.items_per_s());
     let title = format!(
         "{} (version {}), {workload}, {:?} per run after {:?} warm-up",
         args.model,
@@ -118,15 +77,10 @@ pub async fn run(server: &Server, args: Args, json_mode: bool) -> anyhow::Result
         json_mode,
         json!({
             "server": server.address, "model": args.model, "version": args.version, "workload": workload.to_string(),
-            "runs": reports.iter().map(|r| {
-                let mut row = r.to_json();
-                row["vs_in_process"] = json!(ratio(r));
-                row
-            }).collect::<Vec<_>>(),
-            "in_process": ceiling.as_ref().map(InProcessReport::to_json),
+            "runs": reports.iter().map(LoadReport::to_json).collect::<Vec<_>>(),
         }),
         || {
-            let mut header = vec![
+            let header = [
                 "concurrency",
                 "connections",
                 "requests",
@@ -138,14 +92,11 @@ pub async fn run(server: &Server, args: Args, json_mode: bool) -> anyhow::Result
                 "max ms",
                 "errors",
             ];
-            if ceiling.is_some() {
-                header.push("vs in-process");
-            }
             let ms = |d: Duration| format!("{:.2}", d.as_secs_f64() * 1e3);
             let rows: Vec<Vec<String>> = reports
                 .iter()
                 .map(|r| {
-                    let mut row = vec![
+                    vec![
                         r.concurrency.to_string(),
                         r.connections.to_string(),
                         r.requests.to_string(),
@@ -156,24 +107,10 @@ pub async fn run(server: &Server, args: Args, json_mode: bool) -> anyhow::Result
                         ms(r.latency.p99),
                         ms(r.latency.max),
                         errors_text(r),
-                    ];
-                    if let Some(x) = ratio(r) {
-                        row.push(format!("{x:.3}"));
-                    }
-                    row
+                    ]
                 })
                 .collect();
-            let mut text = format!("{title}\n{}", aligned(&header, &rows));
-            if let Some(c) = &ceiling {
-                text += &format!(
-                    "\nin-process ceiling: {:.0} items/s ({} threads, batch {}, {} evaluations)",
-                    c.items_per_s(),
-                    c.threads,
-                    c.batch,
-                    c.evaluations
-                );
-            }
-            text
+            format!("{title}\n{}", aligned(&header, &rows))
         },
     );
     Ok(())

@@ -8,7 +8,7 @@ use fastrack_grid::integrate::{step, RkOrder, Workspace};
 use fastrack_grid::scheme::Flux;
 use fastrack_grid::solver::SolveFields;
 use fastrack_grid::upwind::Accuracy;
-use fastrack_valuefn::record::{write_record, MarkdownTable};
+use fastrack_lab::record::{write_record, MarkdownTable};
 use fastrack_valuefn::system::dubins4d;
 use serde_json::{json, Value};
 use std::path::PathBuf;

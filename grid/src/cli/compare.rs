@@ -10,9 +10,9 @@ use fastrack_grid::compare::{
 };
 use fastrack_grid::slice_plot::slice_pair;
 use fastrack_grid::solver::Solution;
+use fastrack_lab::record::{write_record, MarkdownTable};
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::manifest::Manifest;
-use fastrack_valuefn::record::{write_record, MarkdownTable};
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
 use fastrack_valuefn::system::{by_id, decomposition, AffineSystem, DecomposedAxis};
 use serde_json::json;

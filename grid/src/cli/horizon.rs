@@ -7,8 +7,8 @@ use super::common::{command_line, SolveOptions, StudyOutputs};
 use super::teb_table::solve_or_load;
 use fastrack_grid::analysis::{teb, EXTENT_REL_TOL};
 use fastrack_grid::solver::{ConvergenceSet, HistoryPoint, Solution, WindowRates};
-use fastrack_valuefn::plot::{line_chart, Chart, Series};
-use fastrack_valuefn::record::{write_record, MarkdownTable};
+use fastrack_lab::plot::{line_chart, Chart, Series};
+use fastrack_lab::record::{write_record, MarkdownTable};
 use serde_json::json;
 
 /// Arguments of `horizon`.

@@ -5,8 +5,8 @@
 use super::common::command_line;
 use anyhow::Context;
 use fastrack_grid::verify::{required_samples, rollout_rate, Batching, RateProbe};
+use fastrack_lab::record::{write_record, MarkdownTable};
 use fastrack_valuefn::bundle::Bundle;
-use fastrack_valuefn::record::{write_record, MarkdownTable};
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
 use fastrack_valuefn::system::for_bundle;
 use serde_json::json;
