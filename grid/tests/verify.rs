@@ -11,6 +11,10 @@
 //! - A shrunk table (the same network and levels scaled down by 0.6, i.e. a model that underestimates the
 //!   value) is flagged: most samples of its first round break it, and no raised level holds.
 //!
+//! With the `bound` correction the shrunk table is not flagged but bounded: one round rolls out every sample of
+//! its set, and the bound is the largest error, close to the grid's value on that set; split into pieces (and
+//! the pieces into shards) the round combines into the same counts and a bound within the sampling's spread.
+//!
 //! And on a model whose control is known to be weak (fitted to a value function whose gradient makes the
 //! control `u = -a sign(x)`, an undamped oscillator a planner can pump), the search forces larger errors than
 //! random bang-bang planners from the same samples, and the grid solution's policy as the tracker (the
@@ -19,15 +23,16 @@
 use fastrack_grid::grid::Grid;
 use fastrack_grid::solver::{solve, Solution, SolverConfig};
 use fastrack_grid::verify::{
-    required_samples, verify_rows, verify_table, ControlLaw, Outcome, RecordedStates, RowReport, SearchOptions,
-    Selection, VerifyError, VerifyOptions, FALSIFICATION, OPERATIONAL, UNIFORM, ZERO_ERROR_SLICE,
+    combine_pieces, required_samples, verify_rows, verify_table, ControlLaw, Correction, Outcome, RecordedStates,
+    RowReport, SearchOptions, Selection, VerifyError, VerifyOptions, FALSIFICATION, OPERATIONAL, UNIFORM,
+    ZERO_ERROR_SLICE,
 };
+use fastrack_lab::shard::Shard;
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::manifest::{Manifest, NetworkInfo, Provenance, SystemInfo, TebRow, MIN_TEB_ROWS, SCHEMA_VERSION};
 use fastrack_valuefn::network::{Dense, PeriodicEncoding, ValueNetwork};
 use fastrack_valuefn::onnx_writer::write_value_graph;
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
-use fastrack_valuefn::shard::Shard;
 use fastrack_valuefn::system::double_integrator::system;
 use fastrack_valuefn::system::AffineSystem;
 use indicatif::ProgressBar;
@@ -503,4 +508,76 @@ fn a_set_that_reaches_the_domains_edge_is_not_verified() {
             .unwrap();
     assert_eq!(reports[0].outcome, Outcome::LeftDomain, "{:?}", reports[0].rounds);
     assert_eq!(reports[0].rounds.len(), 1);
+}
+
+#[test]
+fn the_bound_correction_bounds_a_shrunk_table_in_one_round_whole_or_in_pieces() {
+    let (system, solution) = ground_truth();
+    let correct_level = LEVEL_FACTOR * grid_v_min();
+    let level = SHRINK * correct_level;
+    let network = fitted_network(system, solution, SHRINK);
+    let (evaluator, bundle) = load(system, &network, level);
+    let beta = system.params[0].max;
+    let adversaries = std::slice::from_ref(solution);
+    let selection = Selection { adversaries, grid_tolerance: 0.1, ..bare_selection(&beta) };
+    let options =
+        |pieces| VerifyOptions { eps: 2e-2, delta: 1e-3, correction: Correction::Bound, pieces, ..shipped_settings() };
+    let n = required_samples(2e-2, 1e-3);
+    let whole = |pieces| {
+        let mut manifest = bundle.manifest.clone();
+        verify_table(&evaluator, &mut manifest, system, &selection, &options(pieces), &ProgressBar::hidden())
+            .unwrap()
+            .remove(0)
+    };
+
+    // Whole: one round of every sample, none a violation, and the bound the largest error reached. The shrunk
+    // set is the correct table's set {V_true <= correct level}, so the independent reference for its bound
+    // is the correct level (within the slack the correct table's own test allows).
+    let one = whole(1);
+    let v = &one.verification;
+    eprintln!("shrunk table, bound correction: {one:?}");
+    assert_eq!((one.outcome, one.rounds.len(), v.rounds, v.violations), (Outcome::Verified, 1, 1, 0));
+    assert_eq!(v.samples, n);
+    assert!(v.checks.iter().take(2).all(|c| c.samples == n), "{:?}", v.checks);
+    assert_eq!(v.verified_level, v.checks.iter().map(|c| c.max_error).fold(0.0, f64::max));
+    assert_eq!(one.rounds[0].level, v.verified_level, "the round's bound is its largest error");
+    assert!((one.sampled_level() - level).abs() < 1e-12, "the set sampled is the row's: {}", one.sampled_level());
+    assert!(
+        (0.9 * correct_level..=1.04 * correct_level).contains(&v.verified_level),
+        "bound {} against the grid's {correct_level}",
+        v.verified_level
+    );
+
+    // In three pieces: the counts add up to at least N, and the bound lies within the sampling's spread.
+    let split = whole(3);
+    let w = &split.verification;
+    assert_eq!((split.outcome, split.rounds.len(), split.piece), (Outcome::Verified, 1, None));
+    assert_eq!(w.samples, 3 * n.div_ceil(3));
+    let families: usize = w.planners.iter().filter(|p| p.family == "model-worst-case").map(|p| p.rollouts).sum();
+    assert_eq!(families, 2 * w.samples, "the model's worst case played every uniform and slice sample");
+    assert!((w.verified_level / v.verified_level - 1.0).abs() < 0.03, "{} vs {}", w.verified_level, v.verified_level);
+
+    // The pieces in two shards (three items: the shards take 0, 2 and 1) combine into what one process gives.
+    let run_shard = |index| {
+        let shard = Shard { index, count: 2 };
+        verify_rows(&evaluator, &bundle.manifest, system, &selection, shard, &options(3), &ProgressBar::hidden())
+            .unwrap()
+    };
+    let (first, second) = (run_shard(0), run_shard(1));
+    assert_eq!((first.len(), second.len()), (2, 1));
+    let combined = combine_pieces([first.clone(), second].concat()).unwrap().remove(0);
+    assert_eq!(combined.verification, split.verification);
+    assert_eq!(combined.rounds, split.rounds);
+    // A piece missing is refused with the reason.
+    let missing = combine_pieces(first);
+    assert!(
+        matches!(&missing, Err(VerifyError::Setting(m)) if m.contains("shards 1 of 3 are missing")),
+        "{:?}",
+        missing.map(|r| r.len())
+    );
+    // The set correction's rounds depend on each other: its samples cannot be split.
+    let mut manifest = bundle.manifest.clone();
+    let set = VerifyOptions { correction: Correction::Set, ..options(3) };
+    let refused = verify_table(&evaluator, &mut manifest, system, &selection, &set, &ProgressBar::hidden());
+    assert!(matches!(&refused, Err(VerifyError::Setting(m)) if m.contains("pieces")), "{:?}", refused.map(|r| r.len()));
 }

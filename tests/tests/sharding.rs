@@ -114,6 +114,26 @@ fn a_verification_in_shards_merges_into_the_single_run() {
     );
     assert!(single["figures"]["rows"][0]["wall_s"].as_f64().is_some_and(|s| s > 0.0), "rows keep their wall times");
 
+    // With the bound correction, each row's samples in 2 pieces: 32 items in 3 shards, whose parts merge into
+    // the single run's table, every row with the samples of both its pieces.
+    let pieces = ["--correction", "bound", "--pieces", "2"];
+    verify(&[&pieces[..], &["--out", &at("whole-pieces")]].concat());
+    let piece_parts = at("piece-parts");
+    for shard in ["0/3", "1/3", "2/3"] {
+        let said = verify(&[&pieces[..], &["--shard", shard, "--part-dir", &piece_parts]].concat());
+        assert!(said.contains(&format!("shard {shard}:")), "{said}");
+    }
+    run_binary(
+        "fastrack-grid",
+        &["verify-merge", "--bundle", bundle.to_str().unwrap(), "--out", &at("merged-pieces")]
+            .into_iter()
+            .chain(["--part-dir", &piece_parts, "--results-dir", &results, "--record", "merged-pieces"])
+            .collect::<Vec<_>>(),
+    );
+    assert_eq!(manifest("whole-pieces"), manifest("merged-pieces"));
+    let row = &manifest("merged-pieces")[0]["verification"];
+    assert_eq!((row["samples"].as_u64(), row["rounds"].as_u64()), (Some(8), Some(1)), "{row}");
+
     // Parts of another bundle's graph are refused.
     let other = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/untrained-dubins4d/1");
     let refused = Command::new(fastrack_e2e::binary("fastrack-grid"))

@@ -4,11 +4,13 @@ mod bench;
 mod common;
 mod compare;
 mod horizon;
+mod reshape;
 mod rollout;
 mod solve;
 mod teb_table;
 mod verify;
 mod verify_bench;
+mod verify_merge;
 
 use clap::{Parser, Subcommand};
 
@@ -41,9 +43,9 @@ enum Command {
     /// writes verified levels into a copy of the bundle.
     Verify(verify::Args),
     /// Merges the parts of a sharded `verify` into the verified bundle and the record a single run writes.
-    VerifyMerge(verify::MergeArgs),
+    VerifyMerge(verify_merge::Args),
     /// Measures a bundle's error-set shapes (extent, boundary radii) again at each row's set level.
-    Reshape(verify::ReshapeArgs),
+    Reshape(reshape::Args),
     /// What a verification's rollouts cost per state and step, one state per call against batched on every
     /// core, with the projected wall time of a row and a table; a record.
     VerifyBench(verify_bench::Args),
@@ -62,8 +64,8 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Horizon(args) => horizon::run(args),
         Command::Compare(args) => compare::run(args),
         Command::Verify(args) => verify::run(args),
-        Command::VerifyMerge(args) => verify::merge(args),
-        Command::Reshape(args) => verify::reshape(args),
+        Command::VerifyMerge(args) => verify_merge::run(args),
+        Command::Reshape(args) => reshape::run(args),
         Command::VerifyBench(args) => verify_bench::run(args),
         Command::Rollout(args) => rollout::run(args),
         Command::Bench(args) => bench::run(args),

@@ -6,23 +6,22 @@ use anyhow::Context;
 use fastrack_grid::format;
 use fastrack_grid::solver::Solution;
 use fastrack_grid::verify::{
-    apply_reports, required_samples, verify_rows, Batching, ControlLaw, Correction, FalsificationOptions,
-    RecordedStates, RowReport, SearchOptions, Selection, VerifyOptions,
+    apply_reports, combine_pieces, required_samples, verify_rows, Batching, ControlLaw, Correction,
+    FalsificationOptions, RecordedStates, RowReport, SearchOptions, Selection, VerifyOptions,
 };
+use fastrack_lab::record::{write_record, MarkdownTable};
+use fastrack_lab::shard::{Part, Shard};
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::manifest::{Manifest, TebRow};
-use fastrack_valuefn::record::{write_record, MarkdownTable};
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
-use fastrack_valuefn::shard::{Part, Shard};
 use fastrack_valuefn::system::{for_bundle, AffineSystem};
-use fastrack_valuefn::teb::{reshape_at_set_levels, TebOptions};
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::time::Instant;
 
 /// File-name stem of verification parts (`grid-verify-part-<index>-of-<count>.json`).
-const PART_STEM: &str = "grid-verify";
+pub(super) const PART_STEM: &str = "grid-verify";
 
 /// Arguments of `verify`.
 #[derive(clap::Args)]
@@ -139,6 +138,11 @@ pub struct Args {
     /// Evaluate and step the chunks in turn on one thread (one session) instead of on every core.
     #[arg(long)]
     sequential: bool,
+    /// Split each row's samples into this many pieces, each on a random stream of its own (with `--correction
+    /// bound`); with `--shard`, each piece of each row is an item of its own, so that a long row runs as short
+    /// jobs. The pieces combine into the row's one round.
+    #[arg(long, default_value_t = 1)]
+    pieces: usize,
     /// Only the rows with these betas (default: every row).
     #[arg(long, value_delimiter = ',')]
     betas: Vec<f64>,
@@ -164,75 +168,14 @@ pub struct Args {
     part_dir: Option<PathBuf>,
 }
 
-/// Arguments of `verify-merge`.
-#[derive(clap::Args)]
-pub struct MergeArgs {
-    /// The bundle's version folder the shards verified, e.g. `models/dubins4d/4`.
-    #[arg(long)]
-    bundle: PathBuf,
-    /// Repository root the verified bundle is written into (`<out>/<name>/<version>/`).
-    #[arg(long)]
-    out: PathBuf,
-    /// Folder holding every shard's part.
-    #[arg(long)]
-    part_dir: PathBuf,
-    /// ONNX Runtime library (default: FASTRACK_ORT_LIB, then .cache/onnxruntime).
-    #[arg(long)]
-    ort_lib: Option<PathBuf>,
-    /// Record name (default `grid-verify-<model>`).
-    #[arg(long)]
-    record: Option<String>,
-    /// Folder of measurement records.
-    #[arg(long, default_value = "bench/results")]
-    results_dir: PathBuf,
-}
-
-/// Arguments of `reshape`.
-#[derive(clap::Args)]
-pub struct ReshapeArgs {
-    /// The bundle's version folder, e.g. `models/dubins4d/4`.
-    #[arg(long)]
-    bundle: PathBuf,
-    /// Repository root the reshaped bundle is written into (`<out>/<name>/<version>/`; the bundle's own
-    /// repository rewrites it in place).
-    #[arg(long)]
-    out: PathBuf,
-    /// ONNX Runtime library (default: FASTRACK_ORT_LIB, then .cache/onnxruntime).
-    #[arg(long)]
-    ort_lib: Option<PathBuf>,
-}
-
-/// Runs `reshape`: every row's extent, boundary radii and nested share measured again at its set level, as
-/// verification leaves them, for a bundle whose shapes were measured at another level.
-pub fn reshape(args: ReshapeArgs) -> anyhow::Result<()> {
-    let Loaded { bundle, system, evaluator } = load(&args.bundle, args.ort_lib.as_deref())?;
-    let mut manifest = bundle.manifest.clone();
-    reshape_at_set_levels(&evaluator, &system, &mut manifest.teb_table, &TebOptions::default())
-        .map_err(anyhow::Error::msg)?;
-    for (before, after) in bundle.manifest.teb_table.iter().zip(&manifest.teb_table) {
-        println!(
-            "beta {:.4}: set level {:.4}, bound {:.4}; extent {:?} -> {:?}; in the next row's set {}",
-            after.beta,
-            after.set_level(),
-            after.bound(),
-            before.extent.iter().map(|x| format!("{x:.3}")).collect::<Vec<_>>(),
-            after.extent.iter().map(|x| format!("{x:.3}")).collect::<Vec<_>>(),
-            after.nested_share.map_or("-".into(), |s| format!("{s:.3}"))
-        );
-    }
-    let dir = Bundle::write(&args.out, manifest, &bundle.onnx)?;
-    println!("wrote the reshaped bundle {}", dir.display());
-    Ok(())
-}
-
 /// A bundle with what verifying it needs.
-struct Loaded {
-    bundle: Bundle,
-    system: AffineSystem,
-    evaluator: Evaluator,
+pub(super) struct Loaded {
+    pub(super) bundle: Bundle,
+    pub(super) system: AffineSystem,
+    pub(super) evaluator: Evaluator,
 }
 
-fn load(path: &Path, ort_lib: Option<&Path>) -> anyhow::Result<Loaded> {
+pub(super) fn load(path: &Path, ort_lib: Option<&Path>) -> anyhow::Result<Loaded> {
     let bundle = Bundle::load(path)?;
     let manifest = &bundle.manifest;
     let system = for_bundle(&manifest.system.id, manifest.n_params()).with_context(|| {
@@ -292,6 +235,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         batch: args.batch,
         batching: Batching { chunk: args.chunk, parallel: !args.sequential },
         control_law,
+        pieces: args.pieces,
         seed: args.seed,
     };
     let adversaries: Vec<Solution> = args
@@ -335,47 +279,26 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     if let Some(dir) = &args.part_dir {
         let part = Part { config, shard, wall_s: started.elapsed().as_secs_f64(), items: reports };
         let path = part.write(dir, PART_STEM).with_context(|| format!("writing the part into {}", dir.display()))?;
-        println!("shard {shard}: {} rows verified; part {}", part.items.len(), path.display());
+        println!("shard {shard}: {} rows or pieces verified; part {}", part.items.len(), path.display());
         return Ok(());
     }
+    let reports = combine_pieces(reports)?;
     let out = Outputs { out: args.out.as_deref(), record: args.record.as_deref(), results_dir: &args.results_dir };
     finish(&evaluator, bundle, &system, reports, config, &out)
 }
 
-/// Runs `verify-merge`: the shards' parts into the verified bundle and the record a single run writes.
-pub fn merge(args: MergeArgs) -> anyhow::Result<()> {
-    let Loaded { bundle, system, evaluator } = load(&args.bundle, args.ort_lib.as_deref())?;
-    let merged = Part::<RowReport>::merge(&args.part_dir, PART_STEM)?;
-    let (verified, loaded) = (merged.config["onnx_sha256"].as_str(), &bundle.manifest.onnx_sha256);
-    anyhow::ensure!(
-        verified == Some(loaded.as_str()),
-        "the parts verified the graph {} but {} holds {loaded}",
-        verified.unwrap_or("(none)"),
-        args.bundle.display()
-    );
-    anyhow::ensure!(
-        merged.config["options"]["control_law"] != json!(ControlLaw::Grid),
-        "the parts played the grid's policy as the tracker (--control-law grid): they verify no bundle"
-    );
-    let mut reports = merged.items;
-    let position = |beta: f64| bundle.manifest.teb_table.iter().position(|row| row.beta == beta);
-    reports.sort_by_key(|r| position(r.beta));
-    let out = Outputs { out: Some(&args.out), record: args.record.as_deref(), results_dir: &args.results_dir };
-    finish(&evaluator, bundle, &system, reports, merged.config, &out)
-}
-
 /// Where a verification's results go.
-struct Outputs<'a> {
+pub(super) struct Outputs<'a> {
     /// Where the verified bundle goes (none: a reference run, record only).
-    out: Option<&'a Path>,
-    record: Option<&'a str>,
-    results_dir: &'a Path,
+    pub(super) out: Option<&'a Path>,
+    pub(super) record: Option<&'a str>,
+    pub(super) results_dir: &'a Path,
 }
 
 /// Writes `reports` into the bundle's table, prints and records them, and writes the verified bundle. A table
 /// the reports cannot be written into (a subset of rows that breaks the monotone bounds) still gets its record,
 /// without the rows' set levels and bounds, before the error.
-fn finish(
+pub(super) fn finish(
     evaluator: &Evaluator,
     bundle: Bundle,
     system: &AffineSystem,

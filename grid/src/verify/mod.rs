@@ -17,31 +17,34 @@
 //! round samples afresh, until a round rolls out all `N` samples of every check without a violation. A row
 //! whose rounds run out, or whose raised level would take the set past the trained domain's error coordinates,
 //! is not verified: its violations stay in the report and in the manifest. That is the
-//! [`Correction::Set`] correction; [`Correction::Bound`] keeps sampling the first round's set and raises only
-//! the bound the errors are checked against.
+//! [`Correction::Set`] correction. [`Correction::Bound`] runs one round on the first set, rolls out every
+//! sample of every check whatever it reaches, and takes the largest error as the bound; its samples can be
+//! split into pieces ([`pieces`]) that run apart and combine into that round.
 //!
 //! With `N >= (2 / eps) (ln(1 / delta) + 1)` samples of a distribution in the final round, the largest error
 //! over them bounds the error from all but an `eps` fraction (by that distribution's measure) of `{V <= c}`,
 //! with confidence `1 - delta` (scenario approach, one decision variable: the level), for these planner
-//! families and this horizon; it is at most `(1 + slack) c`. The search only adds evidence: it can raise the largest error, never lower it, and the
+//! families and this horizon; under the set correction it is at most `(1 + slack) c`. The search only adds evidence: it can raise the largest error, never lower it, and the
 //! samples it starts from are chosen by the other families' errors, so the guarantee is stated for them.
 
 mod batch;
 mod falsify;
 mod operational;
+mod pieces;
 mod sampling;
 mod search;
 
 pub use batch::Batching;
 pub use falsify::FalsificationOptions;
 pub use operational::{InForce, RecordedStates};
+pub use pieces::combine_pieces;
 pub use search::SearchOptions;
 
 use crate::solver::Solution;
 use batch::{Gradient, Rollout, Scene};
+use fastrack_lab::shard::Shard;
 use fastrack_valuefn::manifest::{CheckResult, Manifest, PlannerResult, TebRow, Verification};
 use fastrack_valuefn::runtime::{Evaluator, RuntimeError};
-use fastrack_valuefn::shard::Shard;
 use fastrack_valuefn::simulation::PlannerPolicy;
 use fastrack_valuefn::system::AffineSystem;
 use fastrack_valuefn::teb::{reshape_at_set_levels, TebOptions};
@@ -63,8 +66,8 @@ pub enum Correction {
     /// The sampled set and the bound together: the next round samples `{V <= c}` at the raised `c`, so the
     /// certified set must hold its own level (a set a tracker inside stays within, in error).
     Set,
-    /// The bound alone: every round samples the first round's set, and errors are checked against the raised
-    /// bound (a bound on the error from that set).
+    /// The bound alone: one round samples the first set, rolls out all its samples, and bounds the error from
+    /// that set by the largest error reached (nothing to raise: the bound is the scenario program's solution).
     Bound,
 }
 
@@ -139,6 +142,11 @@ pub struct VerifyOptions {
     /// Whose control law the tracker plays.
     #[serde(default)]
     pub control_law: ControlLaw,
+    /// Each row's samples are split into this many pieces, each rolled out on its own (and, sharded, in its
+    /// own process) with its own random stream, and combined into the row's one round (the `bound` correction
+    /// only: a `set` round's outcome decides the next round's level, so its samples cannot be split).
+    #[serde(default = "one")]
+    pub pieces: usize,
     /// Random seed.
     pub seed: u64,
 }
@@ -165,6 +173,7 @@ impl Default for VerifyOptions {
             max_proposals: 20_000_000,
             min_acceptance: 5e-3,
             control_law: ControlLaw::Model,
+            pieces: 1,
             seed: 11,
         }
     }
@@ -309,8 +318,11 @@ pub struct RowReport {
     pub searched: usize,
     /// Rollout steps taken over all rounds (states times steps, the search's included).
     pub rollout_steps: u64,
-    /// Wall time of the row (s).
+    /// Wall time of the row (s): the sum of its pieces' when it was split.
     pub wall_s: f64,
+    /// Which piece of the row's samples this report covers (none: all of them).
+    #[serde(default)]
+    pub piece: Option<Shard>,
 }
 
 impl RowReport {
@@ -340,10 +352,16 @@ fn check(options: &VerifyOptions) -> Result<(), VerifyError> {
     if !(options.slack.is_finite() && options.slack >= 0.0) {
         return Err(VerifyError::Setting(format!("slack = {} must be >= 0", options.slack)));
     }
-    if options.max_rounds == 0 || options.batch == 0 {
+    if options.max_rounds == 0 || options.batch == 0 || options.pieces == 0 {
         return Err(VerifyError::Setting(format!(
-            "max rounds = {} and batch = {} must be at least 1",
-            options.max_rounds, options.batch
+            "max rounds = {}, batch = {} and pieces = {} must be at least 1",
+            options.max_rounds, options.batch, options.pieces
+        )));
+    }
+    if options.pieces > 1 && options.correction != Correction::Bound {
+        return Err(VerifyError::Setting(format!(
+            "pieces = {}: only the bound correction's one round can be split into pieces",
+            options.pieces
         )));
     }
     if !(0.0..1.0).contains(&options.min_acceptance) {
@@ -361,6 +379,10 @@ fn check(options: &VerifyOptions) -> Result<(), VerifyError> {
 
 fn yes() -> bool {
     true
+}
+
+fn one() -> usize {
+    1
 }
 
 /// The grid solution among `adversaries` nearest the row's `beta`, if one lies within `tolerance` of it.
@@ -603,9 +625,12 @@ fn run_samples(
     })
 }
 
-/// Verifies one row with the iterated level correction and returns the report (the row itself is not
-/// modified). `grid` is the grid solution whose worst-case planner plays, if any; `operational`, the recorded
-/// states of the online loop the operational check draws from, if any.
+/// Verifies one row (or, with `piece`, one piece of its samples) and returns the report (the row itself is
+/// not modified). `grid` is the grid solution whose worst-case planner plays, if any; `operational`, the
+/// recorded states of the online loop the operational check draws from, if any. With the `set` correction the
+/// level is corrected round by round; with the `bound` correction one round rolls out every sample of the
+/// first set and the bound is the largest error reached.
+#[allow(clippy::too_many_arguments)]
 pub fn verify_row(
     evaluator: &Evaluator,
     manifest: &Manifest,
@@ -614,8 +639,15 @@ pub fn verify_row(
     grid: Option<&Solution>,
     operational: Option<&RecordedStates>,
     options: &VerifyOptions,
+    piece: Shard,
 ) -> Result<RowReport, VerifyError> {
     check(options)?;
+    if piece.count != options.pieces {
+        return Err(VerifyError::Setting(format!(
+            "piece {piece} is not one of the {} pieces of a row",
+            options.pieces
+        )));
+    }
     if manifest.system.id != system.id {
         return Err(VerifyError::System { bundle: manifest.system.id.clone(), system: system.id.into() });
     }
@@ -633,7 +665,6 @@ pub fn verify_row(
     let started = Instant::now();
     let mut rng = StdRng::seed_from_u64(options.seed ^ row.beta.to_bits());
     let params = vec![row.beta; system.n_params()];
-    let n = required_samples(options.eps, options.delta);
     let scene = Scene {
         evaluator,
         system,
@@ -653,15 +684,17 @@ pub fn verify_row(
         let sampler = SublevelSampler::new(evaluator, manifest, system, &params, level, options.proposal_box, 0);
         level = level.max(sampler.quantile_level(options.min_acceptance, &mut rng)?);
     }
-    let (mut rounds, mut rollout_steps) = (Vec::new(), 0u64);
-    let first_level = level;
+    // Every piece shares the row's level; its samples come from a stream of its own.
+    let mut piece_options = options.clone();
+    if !piece.is_whole() {
+        rng = StdRng::seed_from_u64(rng.random::<u64>() ^ (piece.index as u64 + 1).wrapping_mul(0x9E37_79B9_7F4A_7C15));
+        piece_options.falsification.starts = options.falsification.starts.div_ceil(piece.count);
+    }
+    let n = required_samples(options.eps, options.delta).div_ceil(piece.count);
     let (domain_lo, domain_hi): (Vec<f64>, Vec<f64>) = manifest.state.iter().map(|d| (d.min, d.max)).unzip();
-    let (last, outcome) = loop {
-        let sampled_level = match options.correction {
-            Correction::Set => level,
-            Correction::Bound => first_level,
-        };
-        let sampler = SublevelSampler::new(
+    let domain = (&domain_lo[..], &domain_hi[..]);
+    let sampler = |sampled_level: f64| {
+        SublevelSampler::new(
             evaluator,
             manifest,
             system,
@@ -669,27 +702,43 @@ pub fn verify_row(
             sampled_level,
             options.proposal_box,
             options.max_proposals,
-        );
-        let round = run_round(&scene, sampler, operational, (&domain_lo, &domain_hi), level, n, options, &mut rng)?;
-        tracing::info!(
-            beta = row.beta,
-            level,
-            violations = round.report.violations,
-            max_error = round.report.max_error,
-            "round"
-        );
-        rollout_steps += round.rollout_steps;
-        rounds.push(round.report.clone());
-        if round.reached_domain_edge {
-            break (round, Outcome::LeftDomain);
+        )
+    };
+    let (mut rounds, mut rollout_steps) = (Vec::new(), 0u64);
+    let (last, outcome) = match options.correction {
+        Correction::Bound => {
+            // No level to break: every sample is rolled out, and the bound is the largest error (the scenario
+            // program's solution for its one decision variable).
+            let mut round =
+                run_round(&scene, sampler(level), operational, domain, f64::INFINITY, n, &piece_options, &mut rng)?;
+            round.report.level = round.report.max_error;
+            rollout_steps += round.rollout_steps;
+            rounds.push(round.report.clone());
+            let outcome = if round.reached_domain_edge { Outcome::LeftDomain } else { Outcome::Verified };
+            (round, outcome)
         }
-        if round.report.violations == 0 {
-            break (round, Outcome::Verified);
-        }
-        if rounds.len() >= options.max_rounds {
-            break (round, Outcome::RoundsExhausted);
-        }
-        level = round.report.max_error.max(level * (1.0 + MIN_RAISE));
+        Correction::Set => loop {
+            let round = run_round(&scene, sampler(level), operational, domain, level, n, options, &mut rng)?;
+            tracing::info!(
+                beta = row.beta,
+                level,
+                violations = round.report.violations,
+                max_error = round.report.max_error,
+                "round"
+            );
+            rollout_steps += round.rollout_steps;
+            rounds.push(round.report.clone());
+            if round.reached_domain_edge {
+                break (round, Outcome::LeftDomain);
+            }
+            if round.report.violations == 0 {
+                break (round, Outcome::Verified);
+            }
+            if rounds.len() >= options.max_rounds {
+                break (round, Outcome::RoundsExhausted);
+            }
+            level = round.report.max_error.max(level * (1.0 + MIN_RAISE));
+        },
     };
     Ok(RowReport {
         beta: row.beta,
@@ -714,6 +763,7 @@ pub fn verify_row(
         searched: last.searched,
         rollout_steps,
         wall_s: started.elapsed().as_secs_f64(),
+        piece: (!piece.is_whole()).then_some(piece),
     })
 }
 
@@ -741,14 +791,17 @@ pub fn verify_table(
     options: &VerifyOptions,
     progress: &ProgressBar,
 ) -> Result<Vec<RowReport>, VerifyError> {
-    let reports = verify_rows(evaluator, manifest, system, selection, Shard::WHOLE, options, progress)?;
+    let reports =
+        combine_pieces(verify_rows(evaluator, manifest, system, selection, Shard::WHOLE, options, progress)?)?;
     apply_reports(evaluator, manifest, system, &reports)?;
     Ok(reports)
 }
 
-/// Verifies this shard's share of the rows of `manifest` the selection names,
-/// without changing the manifest: the `i`-th selected row belongs to shard `i % count`. Each row's samples
-/// are seeded by the options' seed and the row's `beta` alone, so shards give the reports a single run gives.
+/// Verifies this shard's share of the rows of `manifest` the selection names, without changing the
+/// manifest. The work is a list of items, each selected row's pieces in turn (one item per row unless
+/// `options.pieces` splits its samples), and the `i`-th item belongs to shard `i % count`. Each item's samples
+/// are seeded by the options' seed, the row's `beta` and the piece alone, so shards give the reports a single
+/// run gives; [`combine_pieces`] makes one report per row of them.
 pub fn verify_rows(
     evaluator: &Evaluator,
     manifest: &Manifest,
@@ -764,16 +817,19 @@ pub fn verify_rows(
     if selected.is_empty() {
         return Err(VerifyError::Setting(format!("no TEB row has a beta in {:?}", selection.betas)));
     }
-    let mine: Vec<usize> =
-        selected.iter().enumerate().filter(|(position, _)| shard.takes(*position)).map(|(_, &i)| i).collect();
+    let pieces = options.pieces.max(1);
+    let items = selected.iter().flat_map(|&i| (0..pieces).map(move |index| (i, Shard { index, count: pieces })));
+    let mine: Vec<(usize, Shard)> =
+        items.enumerate().filter(|(position, _)| shard.takes(*position)).map(|(_, item)| item).collect();
     progress.set_length(mine.len() as u64);
     let mut reports = Vec::with_capacity(mine.len());
-    for i in mine {
+    for (i, piece) in mine {
         let row = &manifest.teb_table[i];
         let grid = nearest_adversary(selection.adversaries, row.beta, selection.grid_tolerance);
-        let report = verify_row(evaluator, manifest, system, row, grid, selection.operational, options)?;
+        let report = verify_row(evaluator, manifest, system, row, grid, selection.operational, options, piece)?;
         tracing::info!(
             beta = report.beta,
+            piece = %piece,
             level = report.level,
             verified = report.verification.verified_level,
             violations = report.verification.violations,
