@@ -9,6 +9,8 @@
 //! # Ok(()) }
 //! ```
 
+#![warn(missing_docs)]
+
 pub use fastrack_proto::v1 as pb;
 
 mod replicas;

@@ -10,6 +10,8 @@
 //! [`verify`] (scenario verification of a bundle's TEB table), [`rollout`] (what planners force against a grid
 //! solution's own policy), [`slice_plot`] (PNG figures).
 
+#![warn(missing_docs)]
+
 pub mod analysis;
 pub mod compare;
 pub mod hamiltonian;

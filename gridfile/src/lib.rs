@@ -6,6 +6,8 @@
 //! - [`solution`]: a value function on a grid with the record of how it was solved.
 //! - [`format`]: the `.ftgrid` file.
 
+#![warn(missing_docs)]
+
 pub mod format;
 pub mod grid;
 pub mod settings;

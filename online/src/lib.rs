@@ -4,6 +4,8 @@
 //! one `Track` stream: [`track_oracle::TrackOracle`]), with any raw-path planner behind
 //! [`raw_path::RawPathPlanner`] (A* on a grid by default) and the obstacles of [`geometry`].
 
+#![warn(missing_docs)]
+
 pub mod core;
 pub mod geometry;
 pub mod online_loop;

@@ -1,6 +1,8 @@
 //! The `fastrack.v1` gRPC contract, generated from `proto/fastrack/v1/*.proto`, the planner-speed rules both
 //! of its sides apply to a TEB table, and the contract's API reference.
 
+#![warn(missing_docs)]
+
 pub mod planner_speed;
 pub mod reference;
 

@@ -2,6 +2,8 @@
 //! serves `fastrack.v1` with health and reflection on a dedicated compute pool, guards it with TLS and
 //! bearer tokens, exports Prometheus metrics, and drains gracefully on SIGINT/SIGTERM.
 
+#![warn(missing_docs)]
+
 pub mod auth;
 pub mod convert;
 pub mod deadline;

@@ -1,6 +1,8 @@
 //! The offline half of Parametric FaSTrack: DeepReach training of parametric value functions (burn) and
 //! their export as served, validated model bundles.
 
+#![warn(missing_docs)]
+
 pub mod allocator;
 pub mod causal;
 pub mod config;

@@ -73,12 +73,11 @@ enum Command {
     /// tracker follows with the served control (the model's own dynamics, Euler steps).
     Track(scripted_track::Args),
     /// Load generator: closed-loop clients at each concurrency, unary TrackingControl batches or Track
-    /// ticks; prints throughput and latency percentiles (and, with --in-process, the ratio to evaluating the
-    /// same bundle in this process).
+    /// ticks; prints throughput and latency percentiles.
     Load(load::Args),
     /// The navigation simulator: a robot driven by Parametric FaSTrack (or a baseline) through a 2-D world
     /// over this server: run, bench, fleet, world.
-    Sim(sim::Args),
+    Sim(Box<sim::Args>),
     /// Admin: loads a model from the server's repository.
     LoadModel(model_admin::VersionArgs),
     /// Admin: stops serving a model.
@@ -101,7 +100,7 @@ pub async fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Control(args) => evaluate::run(&server.connect().await?, args, evaluate::Output::Control, json).await,
         Command::Track(args) => scripted_track::run(&server.connect().await?, args, json).await,
         Command::Load(args) => load::run(&server, args, json).await,
-        Command::Sim(args) => sim::run_command(&server, args, json).await,
+        Command::Sim(args) => sim::run_command(&server, *args, json).await,
         Command::LoadModel(args) => model_admin::load(&server.connect().await?, args, json).await,
         Command::UnloadModel(args) => model_admin::unload(&server.connect().await?, args, json).await,
         Command::ReloadModel(args) => model_admin::reload(&server.connect().await?, args, json).await,

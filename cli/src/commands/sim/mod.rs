@@ -1,0 +1,169 @@
+//! `fastrack sim`: the navigation simulator against the server: `run` (one world, one method, a summary and
+//! figures), `bench` (seeded worlds x methods, the paper's Table 1, a record), `fleet` (many robots on one
+//! server at once) and `world` (generate or check a world file).
+
+mod bench;
+mod fleet;
+mod merge;
+mod run;
+mod world;
+
+use super::{print, Server};
+use anyhow::Context as _;
+use fastrack_client::{model_ref, FastrackClient};
+use fastrack_proto::planner_speed::SpeedRow;
+use fastrack_sim::episode::{RunSettings, Simulator};
+use fastrack_sim::tracker::Disturbance;
+use fastrack_sim::world::{World, WorldSpec};
+use std::path::PathBuf;
+use std::sync::Arc;
+
+/// Arguments of `fastrack sim`.
+#[derive(clap::Args)]
+pub struct Args {
+    #[command(subcommand)]
+    command: SimCommand,
+}
+
+#[derive(clap::Subcommand)]
+enum SimCommand {
+    /// One world, one method: prints the run's summary and writes its figures.
+    Run(run::Args),
+    /// Seeded worlds x methods: the paper's Table 1 beside ours, a record and figures.
+    Bench(bench::Args),
+    /// Merges the parts of a sharded `sim bench` into the tables and record a single run gives.
+    Merge(merge::Args),
+    /// Parametric FaSTrack robots on seeded worlds, all at once on one server: ticks/s and latency.
+    Fleet(fleet::Args),
+    /// Generates a world from a seed, or checks a world file.
+    World(world::Args),
+}
+
+/// Settings every simulated run shares.
+#[derive(clap::Args)]
+struct Simulation {
+    /// Model name.
+    #[arg(long, default_value = "dubins4d")]
+    model: String,
+    /// Control period (s); default: the verification step recorded in the model's manifest.
+    #[arg(long)]
+    control_period: Option<f64>,
+    /// RK4 sub-steps per control period (collisions and the bound are checked at each).
+    #[arg(long, default_value_t = 4)]
+    substeps: usize,
+    /// A run that has not reached the goal by then is stopped (s).
+    #[arg(long, default_value_t = 120.0)]
+    time_limit: f64,
+    /// Sensing range (m); default: twice the dTEB at beta_u (the paper's assumption).
+    #[arg(long)]
+    sensor_range: Option<f64>,
+    /// A random push on the tracker's position of at most this many m/s per axis, which the model does not
+    /// know of (default none; the bounds are not guaranteed under it).
+    #[arg(long)]
+    disturbance: Option<f64>,
+}
+
+impl Simulation {
+    fn settings(&self, trace: bool) -> RunSettings {
+        RunSettings {
+            model: model_ref(&self.model, 0),
+            control_period: self.control_period,
+            substeps: self.substeps,
+            time_limit: self.time_limit,
+            sensor_range: self.sensor_range,
+            disturbance: self.disturbance.map(|bound| Disturbance { bound, period: 0.5 }),
+            trace,
+        }
+    }
+
+    /// The simulator of these settings, its model fetched from the server; `trace`: PF's runs record the
+    /// online loop's trace.
+    async fn connect(&self, client: &FastrackClient, trace: bool) -> anyhow::Result<Arc<Simulator>> {
+        let simulator = Simulator::connect(client, self.settings(trace)).await;
+        Ok(Arc::new(simulator.with_context(|| format!("preparing runs of model {}", self.model))?))
+    }
+}
+
+/// How generated worlds look.
+#[derive(clap::Args, serde::Deserialize)]
+struct Generation {
+    /// Workspace width and height (m).
+    #[arg(long, value_delimiter = ',', default_value = "30,20", num_args = 1)]
+    size: Vec<f64>,
+    /// Obstacles per 100 m^2.
+    #[arg(long, default_value_t = 2.0)]
+    density: f64,
+    /// Smallest and largest obstacle size (m): radius, half side, half length.
+    #[arg(long, value_delimiter = ',', default_value = "0.4,1.5", num_args = 1)]
+    size_range: Vec<f64>,
+    /// Worlds (generated or checked) must be feasible for this sTEB (m) instead of the model's, so that
+    /// models of different bounds run on the same worlds; at least the model's sTEB.
+    #[arg(long)]
+    #[serde(default)]
+    feasible_for: Option<f64>,
+}
+
+impl Generation {
+    /// The sTEB generated worlds are made feasible for: --feasible-for, or the model's `steb`.
+    fn inflation(&self, steb: f64) -> anyhow::Result<f64> {
+        match self.feasible_for {
+            None => Ok(steb),
+            Some(m) if m.is_finite() && m >= steb => Ok(m),
+            Some(m) => anyhow::bail!("--feasible-for must be a finite sTEB of at least the model's, {steb} m; got {m}"),
+        }
+    }
+
+    fn spec(&self, seed: u64, inflation: f64) -> anyhow::Result<WorldSpec> {
+        let (&[w, h], &[lo, hi]) = (self.size.as_slice(), self.size_range.as_slice()) else {
+            anyhow::bail!("--size and --size-range take two numbers each, e.g. --size 30,20 --size-range 0.4,1.5");
+        };
+        Ok(WorldSpec {
+            seed,
+            size: [w, h],
+            density: self.density,
+            size_range: (lo, hi),
+            inflation,
+            ..WorldSpec::default()
+        })
+    }
+}
+
+/// Where a benchmark's record goes.
+#[derive(clap::Args)]
+struct Recording {
+    /// Record name (`<results-dir>/<record>.{json,md}`, figures beside it); none without it.
+    #[arg(long)]
+    record: Option<String>,
+    /// Folder of measurement records and figures.
+    #[arg(long, default_value = "bench/results")]
+    results_dir: PathBuf,
+}
+/// Runs `fastrack sim ...`.
+pub async fn run_command(server: &Server, args: Args, json_mode: bool) -> anyhow::Result<()> {
+    match args.command {
+        SimCommand::Run(args) => run::run(&server.connect().await?, args, json_mode).await,
+        SimCommand::Bench(args) => bench::run(&server.connect().await?, args, json_mode).await,
+        SimCommand::Merge(args) => merge::run(args, json_mode),
+        SimCommand::Fleet(args) => fleet::run(&server.connect().await?, args, json_mode).await,
+        SimCommand::World(args) => world::run(&server.connect().await?, args, json_mode).await,
+    }
+}
+
+/// The model's table as the planner-speed rules read it.
+async fn speeds(client: &FastrackClient, model: &str) -> anyhow::Result<Vec<SpeedRow>> {
+    let info = client.get_model(model_ref(model, 0)).await?;
+    let rows: Vec<SpeedRow> = info.teb_table.iter().map(SpeedRow::from).collect();
+    anyhow::ensure!(!rows.is_empty(), "model {model} has an empty TEB table");
+    Ok(rows)
+}
+
+/// The world of a run: the file, or the seed's generated world.
+fn world_of(file: Option<&PathBuf>, generation: &Generation, seed: u64, steb: f64) -> anyhow::Result<World> {
+    let inflation = generation.inflation(steb)?;
+    let world = match file {
+        Some(path) => World::load(path)?,
+        None => generation.spec(seed, inflation)?.generate()?,
+    };
+    world.check_feasible(inflation).context("the world is not feasible for the sTEB")?;
+    Ok(world)
+}

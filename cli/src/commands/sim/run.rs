@@ -1,0 +1,81 @@
+//! `fastrack sim run`: one world, one method, a summary and figures.
+
+use super::{print, world_of, Generation, Simulation};
+use anyhow::Context as _;
+use fastrack_cli::load_generator::LatencySummary;
+use fastrack_client::FastrackClient;
+use fastrack_sim::episode::{Outcome, Run};
+use fastrack_sim::methods::Method;
+use fastrack_sim::plot::{over_time, trajectory};
+use serde_json::json;
+use std::path::PathBuf;
+
+/// Arguments of `fastrack sim run`.
+#[derive(clap::Args)]
+pub(super) struct Args {
+    /// A world file (TOML or JSON); without it, a world generated from --seed.
+    #[arg(long)]
+    world: Option<PathBuf>,
+    /// Seed of the generated world (and of the method's randomness).
+    #[arg(long, default_value_t = 1)]
+    seed: u64,
+    /// pf, f-low, f-high, mf or mppi.
+    #[arg(long, default_value = "pf")]
+    method: String,
+    /// Where the trajectory figure goes (a second figure, over time, goes beside it).
+    #[arg(long, default_value = "target/sim/run.png")]
+    plot: PathBuf,
+    #[command(flatten)]
+    simulation: Simulation,
+    #[command(flatten)]
+    generation: Generation,
+}
+
+fn run_line(run: &Run) -> String {
+    let latency = LatencySummary::from_latencies(&mut run.decision_times.clone());
+    format!(
+        "{}: {} after {:.2} s; min clearance {:.3} m; largest error - bound {}; replans {}, resets {}, held steps {}, server calls {}, steps out of domain {}, steps past the certificate {}; decision p50 {:.3} ms, p99 {:.3} ms{}",
+        run.method,
+        run.outcome.label(),
+        run.time,
+        run.min_clearance,
+        run.worst_excess.map_or("-".into(), |e| format!("{e:.3} m")),
+        run.replans,
+        run.resets,
+        run.held_steps,
+        run.round_trips,
+        run.out_of_domain,
+        run.uncertified_steps,
+        latency.p50.as_secs_f64() * 1e3,
+        latency.p99.as_secs_f64() * 1e3,
+        match &run.outcome {
+            Outcome::Failed(why) => format!(" ({why})"),
+            Outcome::BoundExceeded { error, bound } => format!(" (error {error:.3} m over the bound {bound:.3} m)"),
+            _ => String::new(),
+        }
+    )
+}
+
+/// Runs `fastrack sim run`.
+pub(super) async fn run(client: &FastrackClient, args: Args, json_mode: bool) -> anyhow::Result<()> {
+    let simulator = args.simulation.connect(client, false).await?;
+    let beta_l = simulator.speeds()[0].beta;
+    let world = world_of(args.world.as_ref(), &args.generation, args.seed, simulator.steb_radius())?;
+    let method = Method::parse(&args.method).map_err(anyhow::Error::msg)?;
+    let run = simulator.spawn_run(world.clone(), method, args.seed).await.context("the run's thread failed")??;
+    if let Some(dir) = args.plot.parent() {
+        std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
+    }
+    trajectory(&args.plot, &world, &run, beta_l, 2.0).map_err(anyhow::Error::msg)?;
+    let over = args.plot.with_extension("time.png");
+    over_time(&over, &run).map_err(anyhow::Error::msg)?;
+    print(
+        json_mode,
+        json!({"method": run.method, "outcome": run.outcome.label(), "time_s": run.time, "min_clearance_m": run.min_clearance,
+               "largest_error_minus_bound_m": run.worst_excess, "replans": run.replans, "resets": run.resets, "held_steps": run.held_steps,
+               "server_calls": run.round_trips, "steps_out_of_domain": run.out_of_domain, "steps_past_the_certificate": run.uncertified_steps, "plot": args.plot, "plot_over_time": over}),
+        || format!("{}\nfigures: {} and {}", run_line(&run), args.plot.display(), over.display()),
+    );
+    anyhow::ensure!(!run.outcome.is_unsafe(), "the run was unsafe: {}", run.outcome.label());
+    Ok(())
+}
