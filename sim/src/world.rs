@@ -1,7 +1,7 @@
 //! 2-D worlds: a workspace, a start and a goal, and obstacles (circles, rectangles, walls), read from TOML or
 //! JSON or generated from a seed; checked to be feasible for the sTEB-inflated map.
 
-use fastrack_online::geometry::{clearance, Obstacle, Point};
+use fastrack_online::geometry::{clearance, norm, sub, Obstacle, Point};
 use fastrack_online::raw_path::{GridAStar, PlanRequest, RawPathPlanner};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
@@ -200,32 +200,101 @@ impl World {
     }
 }
 
+/// The kind of world a seed generates.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
+#[serde(rename_all = "kebab-case")]
+pub enum WorldFamily {
+    /// Obstacles of random kinds (circles, rectangles, walls) placed uniformly: `density` per 100 m^2,
+    /// sizes in `size_range`.
+    #[default]
+    Scattered,
+    /// Dense clutter: three times the density, of obstacles half the size.
+    Dense,
+    /// Narrow passages: walls across the workspace, about one per 10 m, each with one gap only a little
+    /// wider than the inflated robot (`2 inflation` plus 0.6-1.2 m), and sparse small obstacles between them.
+    Narrow,
+    /// An open field: a quarter of the density, of obstacles two and a half times the size.
+    Open,
+    /// Obstacles that pop up late: a sparse scattered world plus 2-3 obstacles placed on its shortest path
+    /// farther than `popup_beyond` from the start, outside the sensor's reach when the run starts.
+    PopUp,
+}
+
+impl WorldFamily {
+    /// Every family, in the order tables list them.
+    pub const ALL: [WorldFamily; 5] =
+        [WorldFamily::Scattered, WorldFamily::Dense, WorldFamily::Narrow, WorldFamily::Open, WorldFamily::PopUp];
+
+    /// Its name on the command line and in records.
+    pub fn name(self) -> &'static str {
+        match self {
+            WorldFamily::Scattered => "scattered",
+            WorldFamily::Dense => "dense",
+            WorldFamily::Narrow => "narrow",
+            WorldFamily::Open => "open",
+            WorldFamily::PopUp => "pop-up",
+        }
+    }
+}
+
+impl std::fmt::Display for WorldFamily {
+    fn fmt(&self, f: &mut std::fmt::Formatter<'_>) -> std::fmt::Result {
+        f.write_str(self.name())
+    }
+}
+
+impl std::str::FromStr for WorldFamily {
+    type Err = String;
+
+    fn from_str(text: &str) -> Result<Self, String> {
+        Self::ALL.into_iter().find(|f| f.name() == text).ok_or_else(|| {
+            let names: Vec<&str> = Self::ALL.iter().map(|f| f.name()).collect();
+            format!("unknown world family `{text}`; one of {}", names.join(", "))
+        })
+    }
+}
+
 /// How to generate a world.
 #[derive(Debug, Clone, PartialEq)]
 pub struct WorldSpec {
     /// Seed (the same seed gives the same world).
     pub seed: u64,
+    /// The kind of world.
+    pub family: WorldFamily,
     /// Workspace width and height (m), from the origin.
     pub size: Point,
-    /// Obstacles per 100 m^2 of workspace.
+    /// Obstacles per 100 m^2 of workspace (the scattered family's; the others scale it).
     pub density: f64,
-    /// Range of an obstacle's size (m): circle radius, rectangle half side, wall half length.
+    /// Range of an obstacle's size (m): circle radius, rectangle half side (geometric mean), a quarter of a wall's length (the scattered
+    /// family's; the others scale it).
     pub size_range: (f64, f64),
     /// The inflation a generated world must be feasible for (the model's sTEB).
     pub inflation: f64,
+    /// Pop-up obstacles lie farther than this from the start along the shortest path (m): beyond the
+    /// sensor's reach at the start (the simulator's default range is about 5.5 m on `dubins4d`).
+    pub popup_beyond: f64,
     /// Worlds drawn before giving up.
     pub attempts: usize,
 }
 
 impl Default for WorldSpec {
     fn default() -> Self {
-        Self { seed: 1, size: [30.0, 20.0], density: 2.0, size_range: (0.4, 1.5), inflation: 1.0, attempts: 200 }
+        Self {
+            seed: 1,
+            family: WorldFamily::Scattered,
+            size: [30.0, 20.0],
+            density: 2.0,
+            size_range: (0.4, 1.5),
+            inflation: 1.0,
+            popup_beyond: 6.0,
+            attempts: 200,
+        }
     }
 }
 
 impl WorldSpec {
-    /// A feasible world: start and goal at the middle of the left and right edges, obstacles of random
-    /// kinds placed uniformly, redrawn until the sTEB-inflated map has a path.
+    /// A feasible world of the spec's family: start and goal at the middle of the left and right edges,
+    /// obstacles drawn as the family says, redrawn until the sTEB-inflated map has a path.
     pub fn generate(&self) -> Result<World, WorldError> {
         let (lo, hi) = self.size_range;
         if !(lo > 0.0 && lo <= hi && hi.is_finite() && self.density >= 0.0 && self.density.is_finite()) {
@@ -240,28 +309,121 @@ impl WorldSpec {
         if !(self.size[0] > 4.0 && self.size[1] > 4.0) {
             return invalid("spec.size", format!("{:?}: the workspace must be more than 4 m each way", self.size));
         }
+        if !(self.inflation.is_finite() && self.inflation >= 0.0 && self.popup_beyond.is_finite()) {
+            return invalid(
+                "spec",
+                format!("inflation {} must be >= 0, pop-up distance {} finite", self.inflation, self.popup_beyond),
+            );
+        }
         let mut rng = StdRng::seed_from_u64(self.seed);
-        let count = (self.density * self.size[0] * self.size[1] / 100.0).round() as usize;
         let (w, h) = (self.size[0], self.size[1]);
-        let (start, goal) = ([2.0, h / 2.0], [w - 2.0, h / 2.0]);
         for _ in 0..self.attempts {
-            let obstacles = (0..count).map(|_| random_obstacle(&mut rng, [w, h], (lo, hi))).collect();
             let world = World {
                 min: [0.0, 0.0],
                 max: [w, h],
-                start,
+                start: [2.0, h / 2.0],
                 start_heading: std::f64::consts::FRAC_PI_2,
                 start_speed: default_start_speed(),
-                goal,
+                goal: [w - 2.0, h / 2.0],
                 goal_radius: default_goal_radius(),
-                obstacles,
+                obstacles: self.obstacles(&mut rng),
             };
-            if world.validate().is_ok() && world.check_feasible(self.inflation).is_ok() {
+            if world.validate().is_err() || world.check_feasible(self.inflation).is_err() {
+                continue;
+            }
+            if self.family != WorldFamily::PopUp {
+                return Ok(world);
+            }
+            if let Some(world) = self.with_popups(world, &mut rng) {
                 return Ok(world);
             }
         }
         Err(WorldError::Generation { attempts: self.attempts })
     }
+
+    /// The obstacles of one draw (the pop-up family's before its pop-ups).
+    fn obstacles(&self, rng: &mut StdRng) -> Vec<Obstacle> {
+        let size = self.size;
+        let (lo, hi) = self.size_range;
+        let count = |density: f64| (density * size[0] * size[1] / 100.0).round() as usize;
+        let scattered = |rng: &mut StdRng, density: f64, range: (f64, f64)| -> Vec<Obstacle> {
+            (0..count(density)).map(|_| random_obstacle(rng, size, range)).collect()
+        };
+        match self.family {
+            WorldFamily::Scattered => scattered(rng, self.density, (lo, hi)),
+            WorldFamily::Dense => scattered(rng, 3.0 * self.density, (0.5 * lo, 0.5 * hi)),
+            WorldFamily::Open => scattered(rng, 0.25 * self.density, (2.5 * lo, 2.5 * hi)),
+            WorldFamily::PopUp => scattered(rng, 0.5 * self.density, (lo, hi)),
+            WorldFamily::Narrow => {
+                let walls = ((size[0] / 10.0).round() as usize).max(1);
+                let mut obstacles = scattered(rng, 0.25 * self.density, (0.5 * lo, 0.5 * hi));
+                for k in 1..=walls {
+                    let x = size[0] * k as f64 / (walls + 1) as f64;
+                    let gap = 2.0 * self.inflation + rng.random_range(0.6..1.2);
+                    let low = rng.random_range(1.0..(size[1] - 1.0 - gap).max(1.0 + f64::EPSILON));
+                    let half = 0.15;
+                    obstacles.push(Obstacle::Rectangle { min: [x - half, -1.0], max: [x + half, low] });
+                    obstacles.push(Obstacle::Rectangle { min: [x - half, low + gap], max: [x + half, size[1] + 1.0] });
+                }
+                obstacles
+            }
+        }
+    }
+
+    /// `world` with 2-3 obstacles on its shortest path farther than `popup_beyond` from the start (at least
+    /// 3 m apart and 3 m short of the goal), if it stays feasible.
+    fn with_popups(&self, mut world: World, rng: &mut StdRng) -> Option<World> {
+        let request = PlanRequest {
+            start: world.start,
+            goal: world.goal,
+            obstacles: &world.obstacles,
+            inflation: self.inflation,
+            bounds: world.bounds(),
+        };
+        let path = GridAStar::default().plan(&request).ok()?;
+        let along = arc_lengths(&path);
+        let total = *along.last()?;
+        let wanted = rng.random_range(2..=3);
+        let mut placed = Vec::new();
+        let mut s = self.popup_beyond + rng.random_range(0.0..1.0);
+        while placed.len() < wanted && s < total - 3.0 {
+            let point = point_at(&path, &along, s);
+            let offset = rng.random_range(-0.3..0.3);
+            let popup = Obstacle::Circle { center: [point[0], point[1] + offset], radius: rng.random_range(0.4..1.0) };
+            // Out of the sensor's reach at the start, whatever the path's detours.
+            if popup.distance(world.start) > self.popup_beyond {
+                placed.push(popup);
+            }
+            s += rng.random_range(3.0..6.0);
+        }
+        if placed.len() < 2 {
+            return None;
+        }
+        world.obstacles.extend(placed);
+        (world.validate().is_ok() && world.check_feasible(self.inflation).is_ok()).then_some(world)
+    }
+}
+
+/// Arc length from the first point to each point of `path`.
+fn arc_lengths(path: &[Point]) -> Vec<f64> {
+    let mut along = Vec::with_capacity(path.len());
+    let mut s = 0.0;
+    for (i, p) in path.iter().enumerate() {
+        if i > 0 {
+            s += norm(sub(*p, path[i - 1]));
+        }
+        along.push(s);
+    }
+    along
+}
+
+/// The point at arc length `s` along `path` (`along`: its arc lengths), clamped to its ends.
+fn point_at(path: &[Point], along: &[f64], s: f64) -> Point {
+    let i = along.partition_point(|&a| a < s).clamp(1, path.len() - 1);
+    let (a, b) = (path[i - 1], path[i]);
+    let span = along[i] - along[i - 1];
+    let t = if span > 0.0 { ((s - along[i - 1]) / span).clamp(0.0, 1.0) } else { 0.0 };
+    [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]
 }
 
 fn random_obstacle(rng: &mut StdRng, size: Point, (lo, hi): (f64, f64)) -> Obstacle {
@@ -361,5 +523,71 @@ radius = 1.0
         assert_eq!(a.obstacles.len(), 12, "2 per 100 m^2 of 600 m^2");
         let impossible = WorldSpec { density: 40.0, attempts: 3, ..spec };
         assert!(matches!(impossible.generate(), Err(WorldError::Generation { attempts: 3 })));
+    }
+
+    #[test]
+    fn every_family_generates_seeded_feasible_worlds_of_its_kind() {
+        let inflation = 0.75;
+        let spec = |family, seed| WorldSpec { seed, family, inflation, ..WorldSpec::default() };
+        for family in WorldFamily::ALL {
+            assert_eq!(family.name().parse::<WorldFamily>(), Ok(family));
+            for seed in 1..=3 {
+                let world = spec(family, seed).generate().unwrap_or_else(|e| panic!("{family} seed {seed}: {e}"));
+                assert_eq!(world, spec(family, seed).generate().unwrap(), "{family}: same seed, same world");
+                world.check_feasible(inflation).unwrap();
+                let n = world.obstacles.len();
+                match family {
+                    WorldFamily::Scattered => assert_eq!(n, 12),
+                    WorldFamily::Dense => assert_eq!(n, 36, "three times 12"),
+                    WorldFamily::Open => {
+                        assert_eq!(n, 3, "a quarter of 12");
+                        assert!(world.obstacles.iter().all(|o| size_of(o) >= 1.0 - 1e-9), "{:?}", world.obstacles);
+                    }
+                    WorldFamily::Narrow => {
+                        // 3 walls of two rectangles each, across the whole height but for one gap.
+                        let walls: Vec<&Obstacle> = world.obstacles[n - 6..].iter().collect();
+                        for pair in walls.chunks(2) {
+                            let (Obstacle::Rectangle { max: low, .. }, Obstacle::Rectangle { min: high, .. }) =
+                                (pair[0], pair[1])
+                            else {
+                                panic!("a wall is two rectangles: {pair:?}");
+                            };
+                            let gap = high[1] - low[1];
+                            assert!((2.0 * inflation + 0.6..2.0 * inflation + 1.2).contains(&gap), "gap {gap}");
+                        }
+                    }
+                    WorldFamily::PopUp => {
+                        // The base world's 6 obstacles, then pop-ups on its shortest path out of reach.
+                        let (base, popups) = world.obstacles.split_at(6);
+                        assert!((2..=3).contains(&popups.len()), "{} pop-ups", popups.len());
+                        let request = PlanRequest {
+                            start: world.start,
+                            goal: world.goal,
+                            obstacles: base,
+                            inflation,
+                            bounds: world.bounds(),
+                        };
+                        let path = GridAStar::default().plan(&request).unwrap();
+                        for popup in popups {
+                            assert!(popup.distance(world.start) > 6.0, "{popup:?}");
+                            let on_path = path.windows(2).any(|s| popup.segment_distance(s[0], s[1]) == 0.0);
+                            assert!(on_path, "{popup:?} blocks the base world's path");
+                        }
+                    }
+                }
+            }
+        }
+        let unknown = "maze".parse::<WorldFamily>().unwrap_err();
+        assert!(unknown.contains("scattered, dense, narrow, open, pop-up"), "{unknown}");
+    }
+
+    /// The size the generator drew an obstacle at: a circle's radius, the geometric mean of a rectangle's
+    /// half sides, a quarter of a wall's length.
+    fn size_of(obstacle: &Obstacle) -> f64 {
+        match obstacle {
+            Obstacle::Circle { radius, .. } => *radius,
+            Obstacle::Rectangle { min, max } => 0.5 * ((max[0] - min[0]) * (max[1] - min[1])).sqrt(),
+            Obstacle::Wall { from, to, .. } => 0.25 * norm(sub(*to, *from)),
+        }
     }
 }

@@ -7,7 +7,7 @@ use fastrack_e2e::{binary, run_binary, TestServer};
 use fastrack_sim::bench::{summarise, table, time_ratio};
 use fastrack_sim::episode::{Outcome, Run, RunSettings, Simulator};
 use fastrack_sim::methods::{Method, MppiSettings};
-use fastrack_sim::world::{World, WorldSpec};
+use fastrack_sim::world::{World, WorldFamily, WorldSpec};
 use std::path::Path;
 use std::process::Command;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -166,4 +166,34 @@ async fn worlds_generated_for_a_larger_steb_keep_it_clear() {
     let refused = Command::new(binary("fastrack")).args(world_args(steb * 0.5)).output().unwrap();
     let said = String::from_utf8_lossy(&refused.stderr);
     assert!(!refused.status.success() && said.contains("--feasible-for must be"), "{said}");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn every_world_family_is_driven_safely_by_parametric_fastrack_and_fastrack() {
+    let (_server, simulator) = shipped().await;
+    let steb = simulator.steb_radius();
+    let mut lines = Vec::new();
+    let mut unsafe_runs = Vec::new();
+    for family in WorldFamily::ALL {
+        for seed in 1..=2 {
+            let world = WorldSpec { seed, family, inflation: steb, ..WorldSpec::default() }.generate().unwrap();
+            for method in [Method::Parametric, Method::FastrackSlowest, Method::FastrackFastest] {
+                let run = simulator.spawn_run(world.clone(), method.clone(), seed).await.unwrap().unwrap();
+                let line = format!(
+                    "{} on {family} world {seed}: {} after {:.1} s, min clearance {:.3} m",
+                    method.label(),
+                    run.outcome.label(),
+                    run.time,
+                    run.min_clearance
+                );
+                if run.outcome.is_unsafe() || (method == Method::Parametric && run.outcome != Outcome::Reached) {
+                    unsafe_runs.push(line.clone());
+                }
+                lines.push(line);
+            }
+        }
+    }
+    println!("{}", lines.join("\n"));
+    // No collision and no error over the bound in force, on any family, and PF reaches every goal.
+    assert!(unsafe_runs.is_empty(), "{}", unsafe_runs.join("\n"));
 }

@@ -7,7 +7,7 @@
 
 use super::{Context, Decision, MethodError};
 use fastrack_online::core::Answer;
-use fastrack_online::geometry::{remember, Obstacle, Point};
+use fastrack_online::geometry::{clearance, remember, Obstacle, Point};
 use fastrack_online::raw_path::{advance_along, GridAStar, PlanError, PlanRequest, RawPathPlanner};
 use fastrack_proto::planner_speed::SpeedRow;
 use std::collections::VecDeque;
@@ -51,13 +51,20 @@ impl LevelPlanner {
         self.path.iter().copied().collect()
     }
 
-    /// A path at `level`'s inflation from the planner's state.
+    /// A path at `level`'s inflation from the planner's state. FaSTrack's guarantee needs the planner itself
+    /// farther than the level's bound from every obstacle (the tracker may lie anywhere within the bound of
+    /// it); a planner closer than that (at a start in clutter, or beside an obstacle sensed late) has no
+    /// path at this level, though the path planner could lead it out.
     fn plan(&mut self, level: usize) -> Result<VecDeque<Point>, PlanError> {
+        let inflation = self.levels[level].bound;
+        if clearance(&self.obstacles, self.planner) <= inflation {
+            return Err(PlanError::NoPath { start: self.planner, goal: self.context.world.goal, inflation });
+        }
         let request = PlanRequest {
             start: self.planner,
             goal: self.context.world.goal,
             obstacles: &self.obstacles,
-            inflation: self.levels[level].bound,
+            inflation,
             bounds: self.context.world.bounds(),
         };
         Ok(self.path_planner.plan(&request)?.into_iter().skip(1).collect())

@@ -14,7 +14,7 @@ use fastrack_client::{model_ref, FastrackClient};
 use fastrack_proto::planner_speed::SpeedRow;
 use fastrack_sim::episode::{RunSettings, Simulator};
 use fastrack_sim::tracker::Disturbance;
-use fastrack_sim::world::{World, WorldSpec};
+use fastrack_sim::world::{World, WorldFamily, WorldSpec};
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -93,14 +93,28 @@ struct Generation {
     /// Obstacles per 100 m^2.
     #[arg(long, default_value_t = 2.0)]
     density: f64,
-    /// Smallest and largest obstacle size (m): radius, half side, half length.
+    /// Smallest and largest obstacle size (m): radius, half side (geometric mean), quarter of a wall's length.
     #[arg(long, value_delimiter = ',', default_value = "0.4,1.5", num_args = 1)]
     size_range: Vec<f64>,
+    /// The kind of world: scattered (obstacles of random kinds, --density and --size-range), dense (three
+    /// times as many, half the size), narrow (walls across with one narrow gap each), open (a few large
+    /// obstacles) or pop-up (obstacles on the shortest path beyond --popup-beyond, sensed late).
+    #[arg(long, default_value = "scattered")]
+    #[serde(default)]
+    family: WorldFamily,
+    /// Pop-up obstacles lie farther than this from the start (m), beyond the sensor's reach at the start.
+    #[arg(long, default_value_t = 6.0)]
+    #[serde(default = "default_popup_beyond")]
+    popup_beyond: f64,
     /// Worlds (generated or checked) must be feasible for this sTEB (m) instead of the model's, so that
     /// models of different bounds run on the same worlds; at least the model's sTEB.
     #[arg(long)]
     #[serde(default)]
     feasible_for: Option<f64>,
+}
+
+fn default_popup_beyond() -> f64 {
+    WorldSpec::default().popup_beyond
 }
 
 impl Generation {
@@ -119,6 +133,8 @@ impl Generation {
         };
         Ok(WorldSpec {
             seed,
+            family: self.family,
+            popup_beyond: self.popup_beyond,
             size: [w, h],
             density: self.density,
             size_range: (lo, hi),
