@@ -214,8 +214,8 @@ impl TebRow {
     /// (its final round's `sampled_level`), or the learned `level` where the row is unverified. Membership
     /// in the row's bound is membership in this set; only from inside it does [`bound`](Self::bound) hold.
     /// With the `set` correction the sampled level rose with the error, so the set holds its own level and
-    /// the two numbers coincide; with the `bound` correction the set is the first round's and only the
-    /// bound rose.
+    /// the two numbers coincide; with the `bound` correction the set is the one sampled and the bound the
+    /// largest error of its samples.
     pub fn set_level(&self) -> f64 {
         self.verification.as_ref().and_then(|v| v.sampled_level).unwrap_or(self.level)
     }
@@ -232,10 +232,11 @@ impl TebRow {
     }
 }
 
-/// Scenario-based verification of one TEB row (Lin & Bansal), with their iterated level correction: states are
-/// sampled from `{V <= sampled_level}` and rolled out against every planner family; while a round has samples
-/// whose error exceeds the level they were sampled under, the level is raised to the largest error and the
-/// next round samples afresh.
+/// Scenario-based verification of one TEB row (after Lin & Bansal): states are sampled from
+/// `{V <= sampled_level}` and rolled out against every planner family. With the `set` correction (their
+/// iterated level correction), while a round has samples whose error exceeds the level they were sampled
+/// under, the level is raised to the largest error and the next round samples afresh; with the `bound`
+/// correction one round rolls out every sample and its largest error is the bound.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct Verification {
@@ -259,7 +260,8 @@ pub struct Verification {
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sampled_level: Option<f64>,
     /// What the correction raised: `set` (the sampled set with the level: the set holds its own level) or
-    /// `bound` (only the bound on the error from the first round's set); absent without the correction.
+    /// `bound` (one round: the bound on the error from the sampled set is its samples' largest error); absent
+    /// without the correction.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub correction: Option<String>,
     /// Rounds of the iterated level correction (1: the first sampled level held).
