@@ -45,7 +45,7 @@ pub struct Args {
     /// set has next to no volume); later rounds sample under the largest error the previous one found.
     #[arg(long, default_value_t = 0.05)]
     level_margin: f64,
-    /// Largest number of rounds of the level correction.
+    /// Largest number of rounds of the `set` correction (the `bound` correction has one).
     #[arg(long, default_value_t = 8)]
     max_rounds: usize,
     /// What a round with a violation raises: `set` (the next round samples {V <= c} at the raised c: the set
@@ -311,6 +311,7 @@ pub(super) fn finish(
     let mut table = MarkdownTable::new(&[
         "beta",
         "learned level",
+        "outcome",
         "rounds",
         "sampled level",
         "verified level",
@@ -346,6 +347,7 @@ pub(super) fn finish(
         table.row(vec![
             format!("{:.4}", r.beta),
             format!("{:.4}", r.level),
+            serde_json::to_value(r.outcome).ok().and_then(|o| o.as_str().map(String::from)).unwrap_or_default(),
             format!("{}", r.rounds.len()),
             format!("{:.4}", r.sampled_level()),
             format!("{:.4}", v.verified_level),

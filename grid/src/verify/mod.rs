@@ -24,8 +24,9 @@
 //! With `N >= (2 / eps) (ln(1 / delta) + 1)` samples of a distribution in the final round, the largest error
 //! over them bounds the error from all but an `eps` fraction (by that distribution's measure) of `{V <= c}`,
 //! with confidence `1 - delta` (scenario approach, one decision variable: the level), for these planner
-//! families and this horizon; under the set correction it is at most `(1 + slack) c`. The search only adds evidence: it can raise the largest error, never lower it, and the
-//! samples it starts from are chosen by the other families' errors, so the guarantee is stated for them.
+//! families and this horizon; under the set correction it is at most `(1 + slack) c`. The search only adds
+//! evidence: it can raise the largest error, never lower it, and the samples it starts from are chosen by the
+//! other families' errors, so the guarantee is stated for them.
 
 mod batch;
 mod falsify;
@@ -103,7 +104,7 @@ pub struct VerifyOptions {
     pub level_margin: f64,
     /// Confidence parameter delta.
     pub delta: f64,
-    /// Largest number of rounds of the level correction.
+    /// Largest number of rounds of the `set` correction (the `bound` correction has one).
     pub max_rounds: usize,
     /// What the correction raises.
     pub correction: Correction,
