@@ -23,9 +23,9 @@
 use fastrack_grid::grid::Grid;
 use fastrack_grid::solver::{solve, Solution, SolverConfig};
 use fastrack_grid::verify::{
-    combine_pieces, required_samples, verify_rows, verify_table, ControlLaw, Correction, Outcome, RecordedStates,
-    RowReport, SearchOptions, Selection, VerifyError, VerifyOptions, FALSIFICATION, OPERATIONAL, UNIFORM,
-    ZERO_ERROR_SLICE,
+    apply_reports, combine_pieces, required_samples, verify_rows, verify_table, ControlLaw, Correction, Outcome,
+    RecordedStates, RowReport, SearchOptions, Selection, VerifyError, VerifyOptions, FALSIFICATION, OPERATIONAL,
+    UNIFORM, ZERO_ERROR_SLICE,
 };
 use fastrack_lab::shard::Shard;
 use fastrack_valuefn::bundle::Bundle;
@@ -502,12 +502,34 @@ fn a_set_that_reaches_the_domains_edge_is_not_verified() {
     let (evaluator, bundle) = load(system, &network, 1.2 * reach);
     let mut manifest = bundle.manifest.clone();
     let beta = system.params[0].max;
-    let options = VerifyOptions { eps: 2e-2, delta: 1e-3, ..shipped_settings() };
-    let reports =
-        verify_table(&evaluator, &mut manifest, system, &bare_selection(&beta), &options, &ProgressBar::hidden())
-            .unwrap();
-    assert_eq!(reports[0].outcome, Outcome::LeftDomain, "{:?}", reports[0].rounds);
-    assert_eq!(reports[0].rounds.len(), 1);
+    for correction in [Correction::Set, Correction::Bound] {
+        let options = VerifyOptions { eps: 2e-2, delta: 1e-3, correction, ..shipped_settings() };
+        let reports = verify_rows(
+            &evaluator,
+            &bundle.manifest,
+            system,
+            &bare_selection(&beta),
+            Shard::WHOLE,
+            &options,
+            &ProgressBar::hidden(),
+        )
+        .unwrap();
+        assert_eq!(reports[0].outcome, Outcome::LeftDomain, "{correction:?}: {:?}", reports[0].rounds);
+        assert_eq!(reports[0].rounds.len(), 1);
+        // Under the bound correction nothing is a violation, so only the refusal can flag the row.
+        if correction == Correction::Bound {
+            assert_eq!(reports[0].verification.violations, 0);
+        }
+        // Without a violation the manifest entry would look verified: the table refuses it, naming the row.
+        if reports[0].verification.violations == 0 {
+            let refused = apply_reports(&evaluator, &mut manifest, system, &reports);
+            assert!(
+                matches!(&refused, Err(e @ VerifyError::LeftDomain { .. }) if e.to_string().contains("domain's edge")),
+                "{correction:?}: {refused:?}"
+            );
+            assert!(manifest.teb_table.iter().all(|row| row.verification.is_none()), "nothing was written");
+        }
+    }
 }
 
 #[test]

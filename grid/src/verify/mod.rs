@@ -216,6 +216,16 @@ pub enum VerifyError {
         /// Proposals drawn.
         proposed: usize,
     },
+    /// A row's sampled set reached the trained domain's edge: it cannot be served as verified.
+    #[error(
+        "row beta {beta}: the set {{V <= {level}}} reaches the trained domain's edge, where the model is extrapolated; the row is not verified (a smaller --level-margin or a model trained on a wider domain)"
+    )]
+    LeftDomain {
+        /// Row.
+        beta: f64,
+        /// The level of the set sampled.
+        level: f64,
+    },
     /// The recorded operational states cannot be read or sampled.
     #[error("operational states: {0}")]
     Operational(String),
@@ -844,13 +854,18 @@ pub fn verify_rows(
 }
 
 /// Writes `reports` into their rows of `manifest` (matched by `beta`), keeps the bounds monotone in `beta`,
-/// and reshapes every row's extent and boundary radii at its set level.
+/// and reshapes every row's extent and boundary radii at its set level. A row whose set reached the trained
+/// domain's edge without a violation (always so under the `bound` correction) is refused: its manifest entry
+/// would look verified, though its rollouts ran on an extrapolated model.
 pub fn apply_reports(
     evaluator: &Evaluator,
     manifest: &mut Manifest,
     system: &AffineSystem,
     reports: &[RowReport],
 ) -> Result<(), VerifyError> {
+    if let Some(report) = reports.iter().find(|r| r.outcome == Outcome::LeftDomain && r.verification.violations == 0) {
+        return Err(VerifyError::LeftDomain { beta: report.beta, level: report.sampled_level() });
+    }
     for report in reports {
         let row =
             manifest.teb_table.iter_mut().find(|row| row.beta == report.beta).ok_or_else(|| {
