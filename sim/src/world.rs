@@ -270,8 +270,9 @@ pub struct WorldSpec {
     pub size_range: (f64, f64),
     /// The inflation a generated world must be feasible for (the model's sTEB).
     pub inflation: f64,
-    /// Pop-up obstacles lie farther than this from the start along the shortest path (m): beyond the
-    /// sensor's reach at the start (the simulator's default range is about 5.5 m on `dubins4d`).
+    /// Pop-up obstacles lie on the shortest path, farther than this from the start (m): beyond the sensor's
+    /// reach at the start (the simulator's default range, twice the dTEB at `beta_u`, is 4.0 m on
+    /// `dubins4d`/4).
     pub popup_beyond: f64,
     /// Worlds drawn before giving up.
     pub attempts: usize,
