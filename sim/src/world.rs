@@ -265,8 +265,8 @@ pub struct WorldSpec {
     pub size: Point,
     /// Obstacles per 100 m^2 of workspace (the scattered family's; the others scale it).
     pub density: f64,
-    /// Range of an obstacle's size (m): circle radius, rectangle half side (geometric mean), a quarter of a wall's length (the scattered
-    /// family's; the others scale it).
+    /// Range of an obstacle's size (m): circle radius, rectangle half side (geometric mean), a quarter of a
+    /// wall's length (the scattered family's; the others scale it).
     pub size_range: (f64, f64),
     /// The inflation a generated world must be feasible for (the model's sTEB).
     pub inflation: f64,
