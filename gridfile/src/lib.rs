@@ -5,6 +5,7 @@
 //! - [`settings`]: the scheme and convergence settings a solution records.
 //! - [`solution`]: a value function on a grid with the record of how it was solved.
 //! - [`format`]: the `.ftgrid` file.
+//! - [`spec`]: what a solve is ([`spec::SolveSpec`]) and where its file is kept ([`spec::SolutionStore`]).
 
 #![warn(missing_docs)]
 
@@ -12,3 +13,4 @@ pub mod format;
 pub mod grid;
 pub mod settings;
 pub mod solution;
+pub mod spec;

@@ -1,6 +1,7 @@
 //! The training configuration: one TOML file holds every hyperparameter; validated before any work.
 
 use anyhow::{bail, ensure, Context};
+use fastrack_gridfile::spec::{SolveSeries, DEFAULT_STORE};
 use fastrack_valuefn::network::PeriodicEncoding;
 use fastrack_valuefn::system::{by_id, AffineSystem, SYSTEM_IDS};
 use serde::{Deserialize, Serialize};
@@ -201,8 +202,13 @@ pub struct OptimizerConfig {
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(deny_unknown_fields)]
 pub struct SupervisionConfig {
-    /// Solution files, relative to the working directory.
-    pub solutions: Vec<PathBuf>,
+    /// The solutions, by spec (what each solve is; `fastrack-grid solve --config <this file>` makes the
+    /// missing ones).
+    pub solutions: SolveSeries,
+    /// The directory the solutions are kept in, relative to the working directory (default
+    /// `target/grid-solutions`).
+    #[serde(default = "default_store")]
+    pub store: PathBuf,
     /// Weight of the mean squared error to the grid values, added to the residual loss.
     pub weight: f64,
     /// Weight of the mean squared error of `dV/dr` to the grid's central differences (Sobolev training; the
@@ -250,6 +256,10 @@ pub enum GradientMetric {
     /// HJI residual; an axis a strong control drives (dubins4d's heading) weighs most. The weights average 1
     /// over the axes, so `gradient_weight` keeps its scale.
     Hamiltonian,
+}
+
+fn default_store() -> PathBuf {
+    PathBuf::from(DEFAULT_STORE)
 }
 
 fn default_under_weight() -> f64 {
@@ -323,7 +333,10 @@ impl TrainConfig {
         ensure!(o.gradient_clip_norm.is_none_or(|c| c > 0.0), "optimizer.gradient_clip_norm must be > 0 when set");
         ensure!(self.checkpoint_every > 0, "checkpoint_every must be > 0");
         if let Some(sup) = &self.supervision {
-            ensure!(!sup.solutions.is_empty(), "supervision.solutions must list at least one grid solution file");
+            ensure!(!sup.solutions.solves.is_empty(), "supervision.solutions.solves must list at least one solve");
+            for spec in sup.solutions.specs() {
+                spec.grid().and_then(|_| spec.params()).context("supervision.solutions")?;
+            }
             ensure!(sup.weight.is_finite() && sup.weight > 0.0, "supervision.weight must be > 0");
             ensure!(
                 sup.gradient_weight.is_finite() && sup.gradient_weight >= 0.0,

@@ -11,6 +11,7 @@ use crate::config::{GradientMetric, SupervisionConfig};
 use burn::tensor::{Device, Tensor, TensorData};
 use fastrack_gridfile::format::{load, FormatError};
 use fastrack_gridfile::solution::Solution;
+use fastrack_gridfile::spec::{SolutionStore, StoreError};
 use fastrack_valuefn::system::AffineSystem;
 use rand::{Rng, SeedableRng};
 use std::path::PathBuf;
@@ -21,6 +22,9 @@ pub enum SupervisionError {
     /// The file cannot be read or is not a solution.
     #[error(transparent)]
     Format(#[from] FormatError),
+    /// A solution the config names is not in its store, or its file holds another solve.
+    #[error("{0}; make the config's grid solutions with `fastrack-grid solve --config <the training config>`")]
+    Store(#[from] StoreError),
     /// The solution does not fit the system, its domain, its parameters or the trained horizon.
     #[error("{path}: {problem}")]
     Mismatch {
@@ -84,28 +88,58 @@ pub struct GridSupervision {
 }
 
 impl GridSupervision {
-    /// Loads and checks the solutions of `config` against the trained `system` (in its parameter mode) and
-    /// the largest trained horizon `tau_max`. With one network parameter and several solutions, they must
-    /// share one horizon and have distinct `beta`; their grids may differ (a domain scaled to each `beta`'s
-    /// error set) but each must overlap the next.
+    /// Loads the solutions `config` names from its store (each checked to be its spec's solve) and checks
+    /// them as [`GridSupervision::from_files`] does.
     pub fn load(
         config: &SupervisionConfig,
         system: &AffineSystem,
         tau_max: f64,
         seed: u64,
     ) -> Result<Self, SupervisionError> {
-        let mut solutions = config
+        let store = SolutionStore::new(&config.store);
+        let solutions = config
             .solutions
+            .specs()
             .iter()
-            .map(|path| {
-                let solution = load(path)?;
+            .map(|spec| Ok((store.path(spec), store.load(spec)?)))
+            .collect::<Result<Vec<_>, SupervisionError>>()?;
+        Self::from_solutions(config, solutions, system, tau_max, seed)
+    }
+
+    /// Loads and checks the solution files `paths` against the trained `system` (in its parameter mode) and
+    /// the largest trained horizon `tau_max`, to supervise as `config` says. With one network parameter and
+    /// several solutions, they must share one horizon and have distinct `beta`; their grids may differ (a
+    /// domain scaled to each `beta`'s error set) but each must overlap the next.
+    pub fn from_files(
+        config: &SupervisionConfig,
+        paths: &[PathBuf],
+        system: &AffineSystem,
+        tau_max: f64,
+        seed: u64,
+    ) -> Result<Self, SupervisionError> {
+        let solutions =
+            paths.iter().map(|path| Ok((path.clone(), load(path)?))).collect::<Result<_, SupervisionError>>()?;
+        Self::from_solutions(config, solutions, system, tau_max, seed)
+    }
+
+    /// Checks `solutions` (each with its file) as [`GridSupervision::from_files`] says.
+    fn from_solutions(
+        config: &SupervisionConfig,
+        solutions: Vec<(PathBuf, Solution)>,
+        system: &AffineSystem,
+        tau_max: f64,
+        seed: u64,
+    ) -> Result<Self, SupervisionError> {
+        let mut solutions = solutions
+            .into_iter()
+            .map(|(path, solution)| {
                 let mismatch = |problem: String| SupervisionError::Mismatch { path: path.clone(), problem };
                 check_fits(&solution, system, tau_max).map_err(mismatch)?;
                 let params = network_params(&solution.info.params, system).map_err(mismatch)?;
                 let v_min = solution.values.iter().copied().fold(f64::INFINITY, f64::min);
                 let near_minimum =
                     (0..solution.values.len()).filter(|&i| solution.values[i] <= config.focus_factor * v_min).collect();
-                Ok((path.clone(), Supervised { solution, params, near_minimum }))
+                Ok((path, Supervised { solution, params, near_minimum }))
             })
             .collect::<Result<Vec<_>, SupervisionError>>()?;
         let blend_in_beta = system.n_params() == 1 && solutions.len() > 1;

@@ -65,11 +65,15 @@ fn bad_configs_name_what_is_wrong() {
 
 #[test]
 fn bad_supervision_sections_name_what_is_wrong() {
-    let good = "\n[supervision]\nsolutions = [\"a.ftgrid\"]\nweight = 1.0\npoints = 10\n";
+    let good = "\n[supervision]\nweight = 1.0\npoints = 10\nsolutions = { system = \"double_integrator\", \
+                resolution = [9], solves = [{ beta = 0.5 }], solver = { accuracy = \"weno5\", rk = \"3\", cfl = 0.75, \
+                horizon_cap = 1.0, tolerance = 1e-3, tracking = true } }\n";
     let base = base_text() + good;
     assert!(load(&base).is_ok());
     let cases = [
-        ("solutions = [\"a.ftgrid\"]", "solutions = []", "supervision.solutions must list at least one"),
+        ("solves = [{ beta = 0.5 }]", "solves = []", "supervision.solutions.solves must list at least one solve"),
+        ("resolution = [9]", "resolution = [9, 9, 9]", "supervision.solutions: resolution has 3 entries; give 1 or 2"),
+        ("beta = 0.5", "beta = -0.5", "supervision.solutions: beta = -0.5 must be a positive number"),
         ("weight = 1.0", "weight = 0.0", "supervision.weight must be > 0"),
         ("weight = 1.0", "weight = 1.0\ngradient_weight = -1.0", "supervision.gradient_weight must be >= 0"),
         ("points = 10", "points = 0", "supervision.points must be > 0"),

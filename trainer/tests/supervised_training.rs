@@ -11,10 +11,8 @@
 //! same run with the sign flipped must fail that check.
 
 use burn::tensor::Device;
-use fastrack_grid::format::save;
-use fastrack_grid::grid::Grid;
-use fastrack_grid::scheme::Flux;
-use fastrack_grid::solver::{solve, SolverConfig};
+use fastrack_grid::spec::SolutionStore;
+use fastrack_grid::store::solve_or_load;
 use fastrack_trainer::config::TrainConfig;
 use fastrack_trainer::train::{train, RunDir, TrainOptions};
 use fastrack_valuefn::network::ValueNetwork;
@@ -91,21 +89,14 @@ fn train_supervised(sign: f64) -> Outcome {
     let system = config.system().unwrap();
     let dir = tempfile::tempdir().unwrap();
 
-    // The solutions the config names, solved as its header says, into the temporary folder.
-    let grid = Grid::for_system(&system, &[201, 151]).unwrap();
-    let solver = SolverConfig {
-        flux: Flux::Godunov,
-        tolerance: 1e-9,
-        horizon_cap: config.sampling.tau_max,
-        ..SolverConfig::default()
-    };
+    // The solutions the config names, solved by their specs into a store in the temporary folder.
     let supervision = config.supervision.as_mut().expect("the config is supervised");
-    for (file, beta) in supervision.solutions.iter_mut().zip([0.5, 0.75, 1.0]) {
-        let solution = solve(&system, &[beta], &grid, &solver, false).unwrap();
+    supervision.store = dir.path().join("grid-solutions");
+    let store = SolutionStore::new(&supervision.store);
+    for spec in supervision.solutions.specs() {
+        let (solution, _) = solve_or_load(&store, &spec, false).unwrap();
         let v_min = solution.values.iter().copied().fold(f64::INFINITY, f64::min);
-        eprintln!("grid beta {beta}: V_min {v_min:.4} (closed form {:.4})", closed_form_teb(beta));
-        *file = dir.path().join(file.file_name().unwrap());
-        save(&solution, file).unwrap();
+        eprintln!("grid beta {}: V_min {v_min:.4} (closed form {:.4})", spec.beta, closed_form_teb(spec.beta));
     }
 
     let options = TrainOptions {

@@ -5,6 +5,8 @@ use burn::tensor::Device;
 use fastrack_grid::format::save;
 use fastrack_grid::grid::{Axis, Grid};
 use fastrack_grid::solver::{solve, Solution, SolverConfig};
+use fastrack_grid::spec::{SeriesSolve, SolutionStore, SolveSeries, DEFAULT_STORE};
+use fastrack_grid::store::solve_or_load;
 use fastrack_trainer::config::{GradientMetric, SupervisionConfig};
 use fastrack_trainer::supervision::GridSupervision;
 use fastrack_valuefn::system::{double_integrator, dubins4d, AffineSystem};
@@ -46,9 +48,17 @@ fn rows(t: burn::tensor::Tensor<2>) -> Vec<f32> {
     t.into_data().try_to_vec::<f32>().unwrap()
 }
 
-fn config(solutions: Vec<PathBuf>) -> SupervisionConfig {
+/// Supervision by files: the config's own solution specs are not read.
+fn config() -> SupervisionConfig {
     SupervisionConfig {
-        solutions,
+        solutions: SolveSeries {
+            system: "double_integrator".into(),
+            resolution: vec![7],
+            bounds: vec![],
+            solver: SolverConfig::default(),
+            solves: vec![],
+        },
+        store: PathBuf::from(DEFAULT_STORE),
         weight: 1.0,
         gradient_weight: 0.0,
         points: 500,
@@ -61,9 +71,9 @@ fn config(solutions: Vec<PathBuf>) -> SupervisionConfig {
     }
 }
 
-fn refusal(config: &SupervisionConfig, system: &AffineSystem, tau_max: f64) -> String {
-    match GridSupervision::load(config, system, tau_max, 1) {
-        Ok(_) => panic!("accepted {:?}", config.solutions),
+fn refusal(paths: &[PathBuf], system: &AffineSystem, tau_max: f64) -> String {
+    match GridSupervision::from_files(&config(), paths, system, tau_max, 1) {
+        Ok(_) => panic!("accepted {paths:?}"),
         Err(e) => e.to_string(),
     }
 }
@@ -77,43 +87,79 @@ fn solutions_that_do_not_fit_the_run_are_refused_with_the_reason() {
     let (di_path, _) = solved(dir.path(), "di.ftgrid", &di, &[0.75], 0.2);
     let (unequal, _) = solved(dir.path(), "unequal.ftgrid", &car, &[0.6, 0.9], 0.05);
 
-    let message = refusal(&config(vec![di_path.clone()]), &car, 1.0);
+    let message = refusal(std::slice::from_ref(&di_path), &car, 1.0);
     assert!(message.contains("system `double_integrator`, training `dubins4d`"), "{message}");
 
-    let message = refusal(&config(vec![di_path.clone()]), &di, 0.1);
+    let message = refusal(std::slice::from_ref(&di_path), &di, 0.1);
     assert!(message.contains("lies past sampling.tau_max = 0.1 s"), "{message}");
 
-    let message = refusal(&config(vec![unequal.clone()]), &shared, 1.0);
+    let message = refusal(std::slice::from_ref(&unequal), &shared, 1.0);
     assert!(message.contains("do not map onto the network's 1 parameter(s)"), "{message}");
     assert!(message.contains("unequal.ftgrid"), "the message names the file: {message}");
 
     // The same unequal solution fits a run with one input per planner bound.
-    assert!(GridSupervision::load(&config(vec![unequal]), &car, 1.0, 1).is_ok());
+    assert!(GridSupervision::from_files(&config(), &[unequal], &car, 1.0, 1).is_ok());
 
     let mut narrow = di.clone();
     narrow.params[0].min = 0.8;
-    let message = refusal(&config(vec![di_path.clone()]), &narrow, 1.0);
+    let message = refusal(std::slice::from_ref(&di_path), &narrow, 1.0);
     assert!(message.contains("beta = 0.75 outside the trained range [0.8, 1]"), "{message}");
 
     // Blending in beta needs one horizon, overlapping grids, and distinct beta.
     let (later, _) = solved(dir.path(), "later.ftgrid", &di, &[1.0], 0.3);
-    let message = refusal(&config(vec![di_path.clone(), later]), &di, 1.0);
+    let message = refusal(&[di_path.clone(), later], &di, 1.0);
     assert!(message.contains("needs one horizon for every solution"), "{message}");
     let (left, _) = solved_on(dir.path(), "left.ftgrid", &di, &[0.75], 0.2, &di_grid((-2.0, -0.5)));
     let (right, _) = solved_on(dir.path(), "right.ftgrid", &di, &[1.0], 0.2, &di_grid((0.5, 2.0)));
-    let message = refusal(&config(vec![left.clone(), right]), &di, 1.0);
+    let message = refusal(&[left.clone(), right], &di, 1.0);
     assert!(message.contains("axis `x_r` [0.5, 2] does not overlap `x_r` [-2, -0.5]"), "{message}");
     let (wide, _) = solved_on(dir.path(), "wide.ftgrid", &di, &[1.0], 0.2, &di_grid((-1.0, 2.0)));
-    assert!(GridSupervision::load(&config(vec![left, wide]), &di, 1.0, 1).is_ok(), "overlapping grids blend");
-    let message = refusal(&config(vec![di_path.clone(), di_path.clone()]), &di, 1.0);
+    assert!(GridSupervision::from_files(&config(), &[left, wide], &di, 1.0, 1).is_ok(), "overlapping grids blend");
+    let message = refusal(&[di_path.clone(), di_path.clone()], &di, 1.0);
     assert!(message.contains("a second solution at beta = 0.75"), "{message}");
 
     let missing = dir.path().join("missing.ftgrid");
-    let message = refusal(&config(vec![missing]), &di, 1.0);
+    let message = refusal(&[missing], &di, 1.0);
     assert!(message.contains("missing.ftgrid"), "{message}");
     std::fs::write(dir.path().join("junk.ftgrid"), b"not a solution").unwrap();
-    let message = refusal(&config(vec![dir.path().join("junk.ftgrid")]), &di, 1.0);
+    let message = refusal(&[dir.path().join("junk.ftgrid")], &di, 1.0);
     assert!(message.contains("magic FTGRID01 missing"), "{message}");
+}
+
+#[test]
+fn solutions_named_by_spec_are_read_from_the_store_and_a_missing_one_is_named() {
+    let dir = tempfile::tempdir().unwrap();
+    let di = double_integrator::system();
+    let mut config = config();
+    config.store = dir.path().join("store");
+    config.solutions.solver = SolverConfig { horizon_cap: 0.2, tolerance: 1e-12, ..SolverConfig::default() };
+    config.solutions.solves = [0.5, 1.0].map(|beta| SeriesSolve { beta, bounds: vec![] }).to_vec();
+
+    let message = match GridSupervision::load(&config, &di, 1.0, 1) {
+        Ok(_) => panic!("supervised by solutions that were never made"),
+        Err(e) => e.to_string(),
+    };
+    assert!(message.contains("no solution for double_integrator at beta 0.5"), "{message}");
+    assert!(message.contains("fastrack-grid solve --config"), "the message says how to make them: {message}");
+
+    // Made by the solver's store, they supervise; the batch is the one the same files give.
+    let store = SolutionStore::new(&config.store);
+    for spec in config.solutions.specs() {
+        solve_or_load(&store, &spec, false).unwrap();
+    }
+    let by_spec = GridSupervision::load(&config, &di, 1.0, 7).unwrap().batch(2, &Device::flex());
+    let paths: Vec<PathBuf> = config.solutions.specs().iter().map(|spec| store.path(spec)).collect();
+    let by_file = GridSupervision::from_files(&config, &paths, &di, 1.0, 7).unwrap().batch(2, &Device::flex());
+    assert_eq!(rows(by_spec.target), rows(by_file.target));
+
+    // A file under a spec's name that holds another solve is refused, naming the difference.
+    solved_on(dir.path(), "longer.ftgrid", &di, &[0.5], 0.3, &Grid::for_system(&di, &[7, 7]).unwrap());
+    std::fs::copy(dir.path().join("longer.ftgrid"), &paths[0]).unwrap();
+    let message = match GridSupervision::load(&config, &di, 1.0, 1) {
+        Ok(_) => panic!("supervised by a file of another solve"),
+        Err(e) => e.to_string(),
+    };
+    assert!(message.contains("is not the solve of its spec: solver settings"), "{message}");
 }
 
 #[test]
@@ -123,7 +169,7 @@ fn drawn_targets_blend_the_grid_values_in_beta_at_the_drawn_points() {
     let (low, low_solution) = solved(dir.path(), "low.ftgrid", &di, &[0.5], 0.3);
     let (high, high_solution) = solved(dir.path(), "high.ftgrid", &di, &[1.0], 0.3);
     // Given out of order: sorted by beta.
-    let supervision = GridSupervision::load(&config(vec![high, low]), &di, 1.0, 7).unwrap();
+    let supervision = GridSupervision::from_files(&config(), &[high, low], &di, 1.0, 7).unwrap();
     let batch = supervision.batch(3, &Device::flex());
     let (tau, state, params, target) = (rows(batch.tau), rows(batch.state), rows(batch.params), rows(batch.target));
     assert_eq!((tau.len(), state.len(), params.len(), target.len()), (500, 1000, 500, 500));
@@ -155,7 +201,7 @@ fn blended_solutions_on_different_grids_give_targets_only_where_both_are_defined
     // The lower beta on a box cut to x_r <= 0.5 (as a domain scaled to a smaller error set is).
     let (low, low_solution) = solved_on(dir.path(), "low.ftgrid", &di, &[0.5], 0.3, &di_grid((-2.0, 0.5)));
     let (high, high_solution) = solved(dir.path(), "high.ftgrid", &di, &[1.0], 0.3);
-    let supervision = GridSupervision::load(&config(vec![low, high]), &di, 1.0, 7).unwrap();
+    let supervision = GridSupervision::from_files(&config(), &[low, high], &di, 1.0, 7).unwrap();
     let batch = supervision.batch(5, &Device::flex());
     let (state, params, target) = (rows(batch.state), rows(batch.params), rows(batch.target));
     let mut near_the_cut = 0;
@@ -180,9 +226,9 @@ fn own_grid_rows_supervise_each_solution_at_its_own_beta_past_the_lower_grid() {
     let di = double_integrator::system();
     let (low, low_solution) = solved_on(dir.path(), "low.ftgrid", &di, &[0.5], 0.3, &di_grid((-2.0, 0.5)));
     let (high, high_solution) = solved(dir.path(), "high.ftgrid", &di, &[1.0], 0.3);
-    let mut own = config(vec![low, high]);
+    let mut own = config();
     own.own_grid_share = 0.4;
-    let batch = GridSupervision::load(&own, &di, 1.0, 7).unwrap().batch(5, &Device::flex());
+    let batch = GridSupervision::from_files(&own, &[low, high], &di, 1.0, 7).unwrap().batch(5, &Device::flex());
     let (state, params, target) = (rows(batch.state), rows(batch.params), rows(batch.target));
     let mut past_the_cut = 0;
     for i in 0..500 {
@@ -212,9 +258,9 @@ fn slice_rows_lie_at_zero_error_with_the_grids_value_there() {
     let di = double_integrator::system();
     let (low, low_solution) = solved(dir.path(), "low.ftgrid", &di, &[0.5], 0.3);
     let (high, high_solution) = solved(dir.path(), "high.ftgrid", &di, &[1.0], 0.3);
-    let mut sliced = config(vec![low, high]);
+    let mut sliced = config();
     (sliced.slice_share, sliced.own_grid_share) = (0.2, 0.3);
-    let batch = GridSupervision::load(&sliced, &di, 1.0, 3).unwrap().batch(2, &Device::flex());
+    let batch = GridSupervision::from_files(&sliced, &[low, high], &di, 1.0, 3).unwrap().batch(2, &Device::flex());
     let (state, params, target) = (rows(batch.state), rows(batch.params), rows(batch.target));
     let (mut speeds, mut off_slice) = (Vec::new(), 0);
     for i in 0..500 {
@@ -250,7 +296,7 @@ fn targets_of_a_linear_field_are_its_values_and_its_slope_up_to_the_edges() {
     }
     let path = dir.path().join("linear.ftgrid");
     save(&solution, &path).unwrap();
-    let supervision = GridSupervision::load(&config(vec![path]), &di, 1.0, 5).unwrap();
+    let supervision = GridSupervision::from_files(&config(), &[path], &di, 1.0, 5).unwrap();
     let batch = supervision.batch(0, &Device::flex());
     let (state, target, gradient) = (rows(batch.state), rows(batch.target), rows(batch.target_gradient));
     let mut at_edge = 0;
@@ -277,9 +323,11 @@ fn the_hamiltonian_metric_weighs_each_axis_by_its_squared_dissipation_bound() {
     let car = dubins4d::system().with_shared_parameter();
     let (low, _) = solved(dir.path(), "low.ftgrid", &dubins4d::system(), &[0.5, 0.5], 0.05);
     let (high, _) = solved(dir.path(), "high.ftgrid", &dubins4d::system(), &[1.25, 1.25], 0.05);
-    let mut hamiltonian = config(vec![low.clone(), high.clone()]);
+    let mut hamiltonian = config();
     hamiltonian.gradient_metric = GradientMetric::Hamiltonian;
-    let batch = GridSupervision::load(&hamiltonian, &car, 1.0, 3).unwrap().batch(0, &Device::flex());
+    let batch = GridSupervision::from_files(&hamiltonian, &[low.clone(), high.clone()], &car, 1.0, 3)
+        .unwrap()
+        .batch(0, &Device::flex());
     let (state, params, weights) = (rows(batch.state), rows(batch.params), rows(batch.gradient_weights));
     for i in 0..500 {
         let (theta, v, beta) = (f64::from(state[4 * i + 2]), f64::from(state[4 * i + 3]), f64::from(params[i]));
@@ -292,6 +340,7 @@ fn the_hamiltonian_metric_weighs_each_axis_by_its_squared_dissipation_bound() {
         }
         assert!(weights[4 * i + 2] > 2.0, "row {i}: the heading weighs {}", weights[4 * i + 2]);
     }
-    let euclidean = GridSupervision::load(&config(vec![low, high]), &car, 1.0, 3).unwrap().batch(0, &Device::flex());
+    let euclidean =
+        GridSupervision::from_files(&config(), &[low, high], &car, 1.0, 3).unwrap().batch(0, &Device::flex());
     assert!(rows(euclidean.gradient_weights).iter().all(|&w| w == 1.0));
 }

@@ -2,20 +2,21 @@
 
 use anyhow::{bail, Context};
 use fastrack_grid::format::load;
-use fastrack_grid::grid::{Axis, Grid};
 use fastrack_grid::integrate::RkOrder;
 use fastrack_grid::scheme::Flux;
 use fastrack_grid::solver::Solution;
 use fastrack_grid::solver::{ConvergenceSet, SolverConfig};
+use fastrack_grid::spec::{AxisBounds, SolutionStore, SolveSpec, DEFAULT_STORE};
+use fastrack_grid::store::solve_or_load;
 use fastrack_grid::upwind::Accuracy;
 use fastrack_valuefn::system::{by_id, AffineSystem, DecomposedAxis, SYSTEM_IDS};
-use std::path::PathBuf;
+use std::path::{Path, PathBuf};
 
 /// Where solutions are cached and measurement records written.
 #[derive(clap::Args, Clone, Debug)]
 pub struct StudyOutputs {
-    /// Folder of solution files: solutions found there with the same settings are reused, new ones saved.
-    #[arg(long, default_value = "target/grid-solutions")]
+    /// The solution store: solutions found there with the same spec are reused, new ones saved.
+    #[arg(long, default_value = DEFAULT_STORE)]
     pub solutions_dir: PathBuf,
     /// Record name (`<results-dir>/<record>.{json,md}` and PNG plots beside it; `compare` defaults to
     /// `grid-compare-<model>`, the other commands write no record without it).
@@ -102,36 +103,38 @@ impl SolveOptions {
         }
     }
 
-    /// The grid over the system's domain, with resolution and bound overrides applied.
-    pub fn grid(&self, system: &AffineSystem) -> anyhow::Result<Grid> {
-        let n = system.n_state();
-        let resolution = match self.resolution.len() {
-            1 => vec![self.resolution[0]; n],
-            k if k == n => self.resolution.clone(),
-            k => bail!("--resolution has {k} entries; give 1 or {n} (one per axis of {})", system.id),
+    /// The solve of `beta` these options name.
+    pub fn spec(&self, beta: f64) -> anyhow::Result<SolveSpec> {
+        let bounds = self.bounds.iter().map(|text| parse_bounds(text)).collect::<anyhow::Result<_>>()?;
+        let spec = SolveSpec {
+            system: self.system.clone(),
+            beta,
+            resolution: self.resolution.clone(),
+            bounds,
+            solver: self.config(),
         };
-        let mut axes: Vec<Axis> = system
-            .state
-            .iter()
-            .zip(&resolution)
-            .map(|(d, &n)| Axis { name: d.name.into(), min: d.min, max: d.max, n, periodic: d.periodic })
-            .collect();
-        for spec in &self.bounds {
-            let (name, range) =
-                spec.split_once('=').with_context(|| format!("--bounds `{spec}`: expected name=min:max"))?;
-            let (lo, hi) =
-                range.split_once(':').with_context(|| format!("--bounds `{spec}`: expected name=min:max"))?;
-            let axis = axes.iter_mut().find(|a| a.name == name).with_context(|| {
-                format!(
-                    "--bounds `{spec}`: no axis `{name}`; axes: {}",
-                    system.state.iter().map(|d| d.name).collect::<Vec<_>>().join(", ")
-                )
-            })?;
-            axis.min = lo.trim().parse().with_context(|| format!("--bounds `{spec}`: min is not a number"))?;
-            axis.max = hi.trim().parse().with_context(|| format!("--bounds `{spec}`: max is not a number"))?;
-        }
-        Ok(Grid::new(axes)?)
+        spec.grid().context("--system, --resolution or --bounds")?;
+        Ok(spec)
     }
+
+    /// The solution of `beta` from the store in `dir`, solved and saved there if it lacks it.
+    pub fn solve_or_load(&self, beta: f64, dir: &Path) -> anyhow::Result<Solution> {
+        let spec = self.spec(beta)?;
+        params_for(&spec.system()?, beta)?;
+        Ok(solve_or_load(&SolutionStore::new(dir), &spec, true)?.0)
+    }
+}
+
+/// `name=min:max` as an axis' bounds.
+fn parse_bounds(text: &str) -> anyhow::Result<AxisBounds> {
+    let expected = || format!("--bounds `{text}`: expected name=min:max");
+    let (axis, range) = text.split_once('=').with_context(expected)?;
+    let (min, max) = range.split_once(':').with_context(expected)?;
+    Ok(AxisBounds {
+        axis: axis.into(),
+        min: min.trim().parse().with_context(|| format!("--bounds `{text}`: min is not a number"))?,
+        max: max.trim().parse().with_context(|| format!("--bounds `{text}`: max is not a number"))?,
+    })
 }
 
 /// Parameters for a `beta` query: every parameter equal to `beta`, checked against the system's range.

@@ -3,7 +3,6 @@
 //! axes' solutions (`--axis-solutions`).
 
 use super::common::{axes_at, command_line, load_axis_solutions, SolveOptions, StudyOutputs};
-use super::teb_table::solve_or_load;
 use anyhow::{bail, Context};
 use fastrack_grid::compare::{
     combined_on_axis, compare, learned_on_axis, learned_on_grid, slices, Comparison, Learned, Slices,
@@ -134,7 +133,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let mut table = MarkdownTable::new(&[&["beta"][..], &COLUMNS].concat());
     let mut rows = Vec::new();
     for &beta in &args.betas {
-        let solution = solve_or_load(&system, &solve, beta, &args.outputs.solutions_dir)?;
+        let solution = solve.solve_or_load(beta, &args.outputs.solutions_dir)?;
         let learned = learned_on_grid(&evaluator, &solution, &vec![beta; manifest.n_params()])?;
         let png = args.outputs.results_dir.join(format!("{name}-beta{beta}.png"));
         let title = format!("{} beta {beta}", manifest.name);

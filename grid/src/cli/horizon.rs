@@ -4,7 +4,6 @@
 //! step); plots and a measurement record.
 
 use super::common::{command_line, SolveOptions, StudyOutputs};
-use super::teb_table::solve_or_load;
 use fastrack_grid::analysis::{teb, EXTENT_REL_TOL};
 use fastrack_grid::solver::{ConvergenceSet, HistoryPoint, Solution, WindowRates};
 use fastrack_lab::plot::{line_chart, Chart, Series};
@@ -126,7 +125,6 @@ fn parse_resolution(text: &str) -> Result<Vec<usize>, String> {
 
 /// Runs `horizon`.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let system = args.solve.system()?;
     let set = args.solve.config().converge_on.unwrap_or(ConvergenceSet::DIAGNOSTIC);
     let resolutions: Vec<Vec<usize>> =
         if args.resolutions.is_empty() { vec![args.solve.resolution.clone()] } else { args.resolutions.clone() };
@@ -139,7 +137,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
                 tolerance: args.solve.tolerance * scale,
                 ..args.solve.clone()
             };
-            let solution = solve_or_load(&system, &options, beta, &args.outputs.solutions_dir)?;
+            let solution = options.solve_or_load(beta, &args.outputs.solutions_dir)?;
             let label = solution.grid.axes().iter().map(|a| a.n.to_string()).collect::<Vec<_>>().join("x");
             let windowed = solution.info.config.rate_window > 0.0;
             let report_tolerance = args.report_tolerance * scale;

@@ -1,18 +1,14 @@
 //! `teb-table`: the grid's TEB table over `beta` (the classic FaSTrack bound at `beta_l`/`beta_u` and the Meta-FaSTrack levels),
 //! across resolutions and accuracies, with convergence plots and a measurement record.
 
-use super::common::{command_line, params_for, SolveOptions, StudyOutputs};
-use anyhow::Context;
+use super::common::{command_line, SolveOptions, StudyOutputs};
 use fastrack_grid::analysis::{teb, Teb, EXTENT_REL_TOL};
-use fastrack_grid::format::{load, save};
-use fastrack_grid::scheme::Flux;
-use fastrack_grid::solver::{solve, Solution};
+use fastrack_grid::solver::Solution;
 use fastrack_grid::upwind::Accuracy;
 use fastrack_lab::plot::{line_chart, Chart, Series};
 use fastrack_lab::record::{write_record, MarkdownTable};
 use fastrack_valuefn::system::AffineSystem;
 use serde_json::json;
-use std::path::{Path, PathBuf};
 
 /// Arguments of `teb-table`.
 #[derive(clap::Args)]
@@ -40,58 +36,6 @@ struct Entry {
     solution: Solution,
 }
 
-/// The solution file for a configuration.
-pub fn solution_path(dir: &Path, system: &str, beta: f64, resolution: &[usize], options: &SolveOptions) -> PathBuf {
-    let res = resolution.iter().map(|n| n.to_string()).collect::<Vec<_>>().join("x");
-    let bounds = if options.bounds.is_empty() { String::new() } else { format!("-{}", options.bounds.join("_")) };
-    let config = options.config();
-    let mut set = match config.converge_on {
-        Some(set) => format!("-set{}e{}", set.margin, set.edge_nodes),
-        None => String::new(),
-    };
-    if config.rate_window > 0.0 {
-        set += &format!("-win{}", config.rate_window);
-    }
-    if config.settle_time > 0.0 {
-        set += &format!("-settle{}", config.settle_time);
-    }
-    if config.flux != Flux::LaxFriedrichs {
-        set += &format!("-{}", config.flux);
-    }
-    dir.join(format!(
-        "{system}-beta{beta}-n{res}-{}-rk{}-tol{}-cap{}{set}{}.ftgrid",
-        options.accuracy,
-        options.rk,
-        options.tolerance,
-        options.horizon_cap,
-        bounds.replace([':', '='], "")
-    ))
-}
-
-/// Loads the solution for `options` at `beta` if a matching file exists, else solves and saves it.
-pub fn solve_or_load(system: &AffineSystem, options: &SolveOptions, beta: f64, dir: &Path) -> anyhow::Result<Solution> {
-    let grid = options.grid(system)?;
-    let resolution: Vec<usize> = grid.axes().iter().map(|a| a.n).collect();
-    let path = solution_path(dir, system.id, beta, &resolution, options);
-    let config = options.config();
-    let params = params_for(system, beta)?;
-    if path.exists() {
-        match load(&path) {
-            Ok(s) if s.grid == grid && s.info.config == config && s.info.params == params => {
-                tracing::info!(path = %path.display(), "reusing solution");
-                return Ok(s);
-            }
-            Ok(_) => tracing::warn!(path = %path.display(), "solution file has other settings; solving again"),
-            Err(e) => tracing::warn!(error = %e, "unreadable solution file; solving again"),
-        }
-    }
-    tracing::info!(system = system.id, beta, ?resolution, accuracy = %config.accuracy, "solving");
-    let solution = solve(system, &params, &grid, &config, true)?;
-    std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
-    save(&solution, &path)?;
-    Ok(solution)
-}
-
 fn fmt(x: f64) -> String {
     format!("{x:.4}")
 }
@@ -116,7 +60,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         for resolution in &resolutions {
             for &beta in &betas {
                 let options = SolveOptions { accuracy, resolution: resolution.clone(), ..args.solve.clone() };
-                let solution = solve_or_load(&system, &options, beta, &args.outputs.solutions_dir)?;
+                let solution = options.solve_or_load(beta, &args.outputs.solutions_dir)?;
                 let teb = teb(&solution, &system, EXTENT_REL_TOL);
                 println!(
                     "{accuracy} n={:?} beta={beta}: V_min {:.4} extent {:?} horizon {:.2} s {} wall {:.1} s",
