@@ -9,7 +9,7 @@
 # - soak: 30 minutes of 100 Track streams and unary load with a reload a minute and robots killed every 5 s:
 #   memory, open streams, p99 and errors per minute (soak.{json,md}, soak-memory.png, soak-latency.png);
 # - the fuzz targets' long run: 100,000 requests per RPC, 20,000 bundles, 50,000 world files and training
-#   configs (fuzz-long-*.{json,md}, written once every case passed).
+#   configs (fuzz-long.{json,md}, a section per target written once its cases passed).
 set -euo pipefail
 cd "$(dirname "$0")/.."
 bash scripts/setup-onnxruntime.sh >/dev/null

@@ -218,31 +218,56 @@ impl Tally {
         );
     }
 
-    /// Prints the tally; with `FASTRACK_FUZZ_RECORD=<name>` also writes the record
-    /// `bench/results/<name>-<target>.{json,md}` (written only after every case passed: a long run's
-    /// evidence of no panic and no wrong answer).
+    /// Prints the tally; with `FASTRACK_FUZZ_RECORD=<name>` also writes this target's section of the record
+    /// `bench/results/<name>.{json,md}` (written only after every case passed: a long run's evidence of no
+    /// panic and no wrong answer), keeping the other targets' sections. Test binaries that share a record
+    /// run one after another (each binary's own tests may run at once).
     pub fn report(&self) {
         eprintln!("{}: accepted / refused per kind: {:?}", self.target, self.outcomes);
         let Ok(name) = std::env::var("FASTRACK_FUZZ_RECORD") else { return };
-        let mut table = fastrack_lab::record::MarkdownTable::new(&["kind", "accepted", "refused"]);
-        for (kind, (accepted, refused)) in &self.outcomes {
-            table.row(vec![kind.clone(), accepted.to_string(), refused.to_string()]);
-        }
-        let (accepted, refused) = self.outcomes("");
-        table.row(vec!["all".into(), accepted.to_string(), refused.to_string()]);
+        static ONE_WRITER: std::sync::Mutex<()> = std::sync::Mutex::new(());
+        let _writing = ONE_WRITER.lock().unwrap_or_else(|poisoned| poisoned.into_inner());
         let dir = std::path::Path::new(env!("CARGO_MANIFEST_DIR")).join("../bench/results");
-        let record = format!("{name}-{}", self.target);
-        let command = format!(
-            "FASTRACK_FUZZ_CASES={} FASTRACK_FUZZ_RECORD={name} cargo test -p fastrack-e2e --test fuzzed_*",
-            self.cases
+        let earlier: Value = std::fs::read_to_string(dir.join(format!("{name}.json")))
+            .ok()
+            .and_then(|text| serde_json::from_str(&text).ok())
+            .unwrap_or_default();
+        let section = |key: &str| earlier.get(key).and_then(Value::as_object).cloned().unwrap_or_default();
+        let (mut config, mut figures) = (section("config"), section("figures"));
+        let (accepted, refused) = self.outcomes("");
+        config.insert(self.target.into(), serde_json::json!({ "cases_per_property": self.cases }));
+        figures.insert(
+            self.target.into(),
+            serde_json::json!({
+                "cases": accepted + refused, "accepted": accepted, "refused": refused, "failures": 0,
+                "wall_s": self.started.elapsed().as_secs_f64(),
+                "outcomes": self.outcomes.iter().map(|(k, (a, r))| (k.clone(), serde_json::json!([a, r]))).collect::<serde_json::Map<_, _>>(),
+                "source_revision": fastrack_lab::provenance::source_revision(),
+            }),
         );
-        let figures = serde_json::json!({
-            "cases": accepted + refused, "accepted": accepted, "refused": refused, "failures": 0,
-            "wall_s": self.started.elapsed().as_secs_f64(),
-            "outcomes": self.outcomes.iter().map(|(k, (a, r))| (k.clone(), serde_json::json!([a, r]))).collect::<serde_json::Map<_, _>>(),
-        });
-        let config = serde_json::json!({ "target": self.target, "cases_per_property": self.cases });
-        fastrack_lab::record::write_record(&dir, &record, &command, config, figures, &[("outcomes", &table)])
+        let tables: Vec<(String, fastrack_lab::record::MarkdownTable)> = figures
+            .iter()
+            .map(|(target, figures)| (format!("{target}: cases per kind"), outcome_table(&figures["outcomes"])))
+            .collect();
+        let command = format!(
+            "FASTRACK_FUZZ_CASES=<cases> FASTRACK_FUZZ_RECORD={name} cargo test -p fastrack-e2e --test fuzzed_*"
+        );
+        let tables: Vec<(&str, &fastrack_lab::record::MarkdownTable)> =
+            tables.iter().map(|(title, table)| (title.as_str(), table)).collect();
+        fastrack_lab::record::write_record(&dir, &name, &command, config.into(), figures.into(), &tables)
             .expect("write the fuzz record");
     }
+}
+
+/// Accepted and refused cases per kind (`{"kind": [accepted, refused]}`), with a total row.
+fn outcome_table(outcomes: &Value) -> fastrack_lab::record::MarkdownTable {
+    let mut table = fastrack_lab::record::MarkdownTable::new(&["kind", "accepted", "refused"]);
+    let (mut all_accepted, mut all_refused) = (0, 0);
+    for (kind, counts) in outcomes.as_object().into_iter().flatten() {
+        let count = |i: usize| counts.get(i).and_then(Value::as_u64).unwrap_or(0);
+        (all_accepted, all_refused) = (all_accepted + count(0), all_refused + count(1));
+        table.row(vec![kind.clone(), count(0).to_string(), count(1).to_string()]);
+    }
+    table.row(vec!["all".into(), all_accepted.to_string(), all_refused.to_string()]);
+    table
 }
