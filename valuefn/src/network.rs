@@ -225,7 +225,7 @@ impl ValueNetwork {
     }
 
     /// How the normalised inputs become the first layer's features.
-    pub fn feature_layout(&self) -> FeatureLayout {
+    pub(crate) fn feature_layout(&self) -> FeatureLayout {
         let periodic: Vec<usize> =
             self.periodic.iter().enumerate().filter(|(_, p)| p.is_some()).map(|(j, _)| 1 + j).collect();
         FeatureLayout::new(self.input.center.len(), &periodic, self.periodic_encoding)

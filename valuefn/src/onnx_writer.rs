@@ -15,9 +15,9 @@ mod onnx {
 }
 
 /// ONNX IR version written.
-pub const IR_VERSION: i64 = 8;
+pub(crate) const IR_VERSION: i64 = 8;
 /// Default-domain opset written.
-pub const OPSET: i64 = 17;
+pub(crate) const OPSET: i64 = 17;
 
 const FLOAT: i32 = 1;
 const INT64: i32 = 7;

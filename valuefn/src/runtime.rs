@@ -7,14 +7,12 @@ use ort::value::{TensorElementType, TensorRef, ValueType};
 use std::path::{Path, PathBuf};
 use std::sync::{Condvar, Mutex, OnceLock};
 
-/// ONNX Runtime version the project ships and tests against.
-pub const REQUIRED_VERSION: &str = "1.31.1";
 /// Environment variable naming the library explicitly.
-pub const LIBRARY_ENV: &str = "FASTRACK_ORT_LIB";
+pub(crate) const LIBRARY_ENV: &str = "FASTRACK_ORT_LIB";
 /// Project folder the set-up script installs the library into.
-pub const CACHE_DIR: &str = ".cache/onnxruntime";
+pub(crate) const CACHE_DIR: &str = ".cache/onnxruntime";
 /// How to install the library.
-pub const INSTALL_HINT: &str = "run `bash scripts/setup-onnxruntime.sh` from the project root (it installs the onnxruntime==1.31.1 wheel into .cache/onnxruntime), or set FASTRACK_ORT_LIB to a libonnxruntime.so of version >= 1.31";
+pub(crate) const INSTALL_HINT: &str = "run `bash scripts/setup-onnxruntime.sh` from the project root (it installs the onnxruntime==1.31.1 wheel into .cache/onnxruntime), or set FASTRACK_ORT_LIB to a libonnxruntime.so of version >= 1.31";
 
 /// ONNX Runtime could not be loaded, or a graph could not be used.
 #[derive(Debug, Clone, thiserror::Error)]
@@ -90,7 +88,7 @@ fn cache_candidates() -> Vec<PathBuf> {
 }
 
 /// Locates the library: `explicit`, then `$FASTRACK_ORT_LIB`, then the project cache.
-pub fn locate_library(explicit: Option<&Path>) -> Result<PathBuf, RuntimeError> {
+pub(crate) fn locate_library(explicit: Option<&Path>) -> Result<PathBuf, RuntimeError> {
     if let Some(path) = explicit {
         return Ok(path.into());
     }

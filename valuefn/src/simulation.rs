@@ -98,7 +98,7 @@ impl PlannerPolicy {
 }
 
 /// A vertex of the planner's box at `params`, each input's sign drawn fairly.
-pub fn random_vertex(system: &AffineSystem, params: &[f64], rng: &mut StdRng) -> Vec<f64> {
+pub(crate) fn random_vertex(system: &AffineSystem, params: &[f64], rng: &mut StdRng) -> Vec<f64> {
     system.planner_input_param.iter().map(|&k| if rng.random_bool(0.5) { params[k] } else { -params[k] }).collect()
 }
 

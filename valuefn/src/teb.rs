@@ -92,7 +92,7 @@ fn project(system: &AffineSystem, r: &mut [f64]) {
 
 /// Minimum of `V(., params)` over the domain: dense uniform sampling, then projected gradient descent with
 /// per-start backtracking from the best samples. Returns `(V_min, argmin)`.
-pub fn minimise(
+pub(crate) fn minimise(
     oracle: &dyn ValueOracle,
     system: &AffineSystem,
     params: &[f64],
