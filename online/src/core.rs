@@ -380,6 +380,7 @@ impl LoopCore {
                 obstacles: &self.obstacles,
                 inflation: speed.steb_radius,
                 bounds: self.settings.bounds,
+                speeds: &self.view.speeds,
             })?;
             self.raw_path = path.into_iter().skip(1).collect();
             self.replan_flag = false;
@@ -453,12 +454,15 @@ impl LoopCore {
             .unwrap_or((0, self.planner))
     }
 
-    /// Free reset candidates: [`reset_candidates`] around the tracker's position, those farther than the
-    /// sTEB from every sensed obstacle.
+    /// Free reset candidates: [`reset_candidates`] around the tracker's position, those inside the workspace
+    /// and farther than the sTEB from every sensed obstacle (a planner reset outside the workspace, where a
+    /// tracker may overshoot its edge, could plan no path back).
     fn free_candidates(&self, position: Point, radius: f64, steb_radius: f64) -> Vec<Point> {
+        let (lo, hi) = self.settings.bounds;
+        let inside = |p: Point| p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1];
         reset_candidates(position, radius, self.settings.reset_candidates)
             .into_iter()
-            .filter(|&candidate| clearance(&self.obstacles, candidate) > steb_radius)
+            .filter(|&candidate| inside(candidate) && clearance(&self.obstacles, candidate) > steb_radius)
             .collect()
     }
 
@@ -725,6 +729,22 @@ mod tests {
         assert_eq!(core.raw_path().count(), 0);
         let (next, _) = run(&mut core, &[0.1, 0.0, 0.0, 0.0], &[OBSTACLE], true, true);
         assert!(next.replanned, "a reset flags a replan");
+    }
+
+    #[test]
+    fn a_tracker_past_the_workspace_edge_is_reset_inside_it() {
+        let mut core = core();
+        core.settings.bounds = ([-20.0, -0.3], [20.0, 20.0]);
+        core.settings.reset_candidates = 64;
+        run(&mut core, &[0.0; 4], &[], true, true);
+        // The tracker 0.4 m below the workspace's lower edge: its own position is no reset point, the first
+        // candidate inside is.
+        let (report, asked) = run(&mut core, &[0.1, -0.7, 0.0, 0.0], &[OBSTACLE], false, true);
+        assert_eq!(report.branch, Branch::Reset);
+        assert!(report.planner[1] >= -0.3, "reset outside the workspace: {:?}", report.planner);
+        let Query::Batch { states, .. } = &asked[1] else { panic!("no batch of candidates: {asked:?}") };
+        // Every candidate asked about lies inside: r_y = s_y - p_y, so p_y = -0.7 - r_y.
+        assert!(states.chunks(4).all(|r| -0.7 - r[1] >= -0.3 - 1e-12), "{states:?}");
     }
 
     #[test]

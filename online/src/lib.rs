@@ -2,11 +2,13 @@
 //! [`core::LoopCore`] makes the decisions of the paper's Alg. 3 without any I/O, and
 //! [`online_loop::OnlineLoop`] has its questions answered by an [`oracle::Oracle`] (the fastrack service over
 //! one `Track` stream: [`track_oracle::TrackOracle`]), with any raw-path planner behind
-//! [`raw_path::RawPathPlanner`] (A* on a grid by default) and the obstacles of [`geometry`].
+//! [`raw_path::RawPathPlanner`] (A* on a grid by default, or [`fastest_path::FastestPath`], which plans for
+//! speed) and the obstacles of [`geometry`].
 
 #![warn(missing_docs)]
 
 pub mod core;
+pub mod fastest_path;
 pub mod geometry;
 pub mod online_loop;
 pub mod oracle;

@@ -3,6 +3,7 @@
 //! `pathfinding` crate) with the path shortened by line of sight.
 
 use crate::geometry::{clearance, norm, segment_is_free, sub, Obstacle, Point};
+use fastrack_proto::planner_speed::SpeedRow;
 use std::collections::VecDeque;
 
 /// What a planner is asked for.
@@ -18,6 +19,9 @@ pub struct PlanRequest<'a> {
     pub inflation: f64,
     /// The workspace, `(min, max)` corners: the path stays inside.
     pub bounds: (Point, Point),
+    /// The TEB table the speed rule reads (slowest row first), for planners that plan for speed; others
+    /// ignore it.
+    pub speeds: &'a [SpeedRow],
 }
 
 /// A path that cannot be planned.
@@ -75,63 +79,118 @@ const COST_SCALE: f64 = 1e6;
 
 impl RawPathPlanner for GridAStar {
     fn plan(&mut self, request: &PlanRequest<'_>) -> Result<Vec<Point>, PlanError> {
-        if !(self.cell.is_finite() && self.cell > 0.0) {
-            return Err(PlanError::Settings(format!("cell = {}; must be a finite size > 0", self.cell)));
+        let grid = CellGrid::new(request, self.cell)?;
+        let goal = grid.cell_of(request.goal);
+        let points = grid.search(|a, b| grid.octile(a, b), |a| grid.octile(a, goal))?;
+        Ok(shortcut(&points, request.obstacles, request.inflation))
+    }
+}
+
+/// A cell of a [`CellGrid`]: column and row.
+pub(crate) type Cell = (i64, i64);
+
+/// The grid one request is searched on: cells of the workspace, their centres, and the steps allowed
+/// between neighbours (keeping the inflation, or leaving a start within it by gaining clearance).
+pub(crate) struct CellGrid<'r> {
+    request: &'r PlanRequest<'r>,
+    cell: f64,
+    columns: i64,
+    rows: i64,
+}
+
+impl<'r> CellGrid<'r> {
+    /// The grid of `request` with cells of `cell` metres, after checking the settings and the goal.
+    pub(crate) fn new(request: &'r PlanRequest<'r>, cell: f64) -> Result<Self, PlanError> {
+        if !(cell.is_finite() && cell > 0.0) {
+            return Err(PlanError::Settings(format!("cell = {cell}; must be a finite size > 0")));
         }
         let (lo, hi) = request.bounds;
-        let inside = |p: Point| p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1];
-        let free = |p: Point| inside(p) && clearance(request.obstacles, p) > request.inflation;
-        if !free(request.goal) {
-            return Err(PlanError::GoalBlocked { goal: request.goal, inflation: request.inflation });
-        }
-        let no_path = || PlanError::NoPath { start: request.start, goal: request.goal, inflation: request.inflation };
-        let span = |axis: usize| ((hi[axis] - lo[axis]) / self.cell).ceil();
+        let span = |axis: usize| ((hi[axis] - lo[axis]) / cell).ceil();
         if !(0..2).all(|axis| span(axis) >= 0.0 && span(axis) <= MAX_CELLS_PER_SIDE) {
             return Err(PlanError::Settings(format!(
-                "the bounds {lo:?}..{hi:?} span more than {MAX_CELLS_PER_SIDE} cells of {} m a side (or are not finite)",
-                self.cell
+                "the bounds {lo:?}..{hi:?} span more than {MAX_CELLS_PER_SIDE} cells of {cell} m a side (or are not finite)"
             )));
         }
-        let (columns, rows) = (span(0) as i64 + 1, span(1) as i64 + 1);
-        let centre = |(i, j): (i64, i64)| [lo[0] + i as f64 * self.cell, lo[1] + j as f64 * self.cell];
-        let cell_of =
-            |p: Point| (((p[0] - lo[0]) / self.cell).round() as i64, ((p[1] - lo[1]) / self.cell).round() as i64);
-        let (start, goal) = (cell_of(request.start), cell_of(request.goal));
-        // A start within the inflation (the planner's cell rounded towards an obstacle, or a planner the
-        // map grew around) is left by steps that strictly gain clearance, until a free cell is reached.
-        let gap = |p: Point| clearance(request.obstacles, p);
-        let step_free = |a: (i64, i64), b: (i64, i64)| {
-            if !(b.0 >= 0 && b.1 >= 0 && b.0 < columns && b.1 < rows) {
-                return false;
-            }
-            let (from, to) = (centre(a), centre(b));
-            if free(from) || a == goal {
-                (free(to) || b == goal) && segment_is_free(request.obstacles, from, to, request.inflation)
-            } else {
-                let here = gap(from);
-                inside(to) && gap(to) > here && segment_is_free(request.obstacles, from, to, here - 1e-9)
-            }
-        };
-        let octile = |a: (i64, i64), b: (i64, i64)| {
-            let (dx, dy) = ((a.0 - b.0).abs() as f64, (a.1 - b.1).abs() as f64);
-            ((dx.max(dy) + (std::f64::consts::SQRT_2 - 1.0) * dx.min(dy)) * self.cell * COST_SCALE) as u64
-        };
-        let successors = |&a: &(i64, i64)| {
+        let grid = Self { request, cell, columns: span(0) as i64 + 1, rows: span(1) as i64 + 1 };
+        if !grid.free(request.goal) {
+            return Err(PlanError::GoalBlocked { goal: request.goal, inflation: request.inflation });
+        }
+        Ok(grid)
+    }
+
+    /// The cell's centre.
+    pub(crate) fn centre(&self, (i, j): Cell) -> Point {
+        let lo = self.request.bounds.0;
+        [lo[0] + i as f64 * self.cell, lo[1] + j as f64 * self.cell]
+    }
+
+    /// The cell whose centre is nearest `p`.
+    pub(crate) fn cell_of(&self, p: Point) -> Cell {
+        let lo = self.request.bounds.0;
+        (((p[0] - lo[0]) / self.cell).round() as i64, ((p[1] - lo[1]) / self.cell).round() as i64)
+    }
+
+    /// Inside the workspace.
+    fn inside(&self, p: Point) -> bool {
+        let (lo, hi) = self.request.bounds;
+        p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1]
+    }
+
+    /// Inside the workspace and farther than the inflation from every obstacle.
+    fn free(&self, p: Point) -> bool {
+        self.inside(p) && clearance(self.request.obstacles, p) > self.request.inflation
+    }
+
+    /// Whether the step from cell `a` to its neighbour `b` is allowed: between free cells (or onto the goal)
+    /// along a segment that keeps the inflation; from a cell within the inflation (the planner's cell rounded
+    /// towards an obstacle, or a planner the map grew around), only a step that strictly gains clearance.
+    fn step_free(&self, a: Cell, b: Cell) -> bool {
+        if !(b.0 >= 0 && b.1 >= 0 && b.0 < self.columns && b.1 < self.rows) {
+            return false;
+        }
+        let (obstacles, inflation) = (self.request.obstacles, self.request.inflation);
+        let goal = self.cell_of(self.request.goal);
+        let (from, to) = (self.centre(a), self.centre(b));
+        if self.free(from) || a == goal {
+            (self.free(to) || b == goal) && segment_is_free(obstacles, from, to, inflation)
+        } else {
+            let here = clearance(obstacles, from);
+            self.inside(to) && clearance(obstacles, to) > here && segment_is_free(obstacles, from, to, here - 1e-9)
+        }
+    }
+
+    /// The octile distance between two cells, in integer cost units.
+    pub(crate) fn octile(&self, a: Cell, b: Cell) -> u64 {
+        let (dx, dy) = ((a.0 - b.0).abs() as f64, (a.1 - b.1).abs() as f64);
+        ((dx.max(dy) + (std::f64::consts::SQRT_2 - 1.0) * dx.min(dy)) * self.cell * COST_SCALE) as u64
+    }
+
+    /// A* over the allowed steps, each costing `step_cost(a, b)`, with the admissible `heuristic`: the path
+    /// of cell centres, its first point the request's start and its last the goal.
+    pub(crate) fn search(
+        &self,
+        step_cost: impl Fn(Cell, Cell) -> u64,
+        heuristic: impl Fn(Cell) -> u64,
+    ) -> Result<Vec<Point>, PlanError> {
+        let request = self.request;
+        let (start, goal) = (self.cell_of(request.start), self.cell_of(request.goal));
+        let successors = |&a: &Cell| {
             let mut next = Vec::with_capacity(8);
             for (di, dj) in [(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)] {
                 let b = (a.0 + di, a.1 + dj);
-                if step_free(a, b) {
-                    next.push((b, octile(a, b)));
+                if self.step_free(a, b) {
+                    next.push((b, step_cost(a, b)));
                 }
             }
             next
         };
-        let (cells, _) = pathfinding::directed::astar::astar(&start, successors, |&a| octile(a, goal), |&a| a == goal)
+        let no_path = || PlanError::NoPath { start: request.start, goal: request.goal, inflation: request.inflation };
+        let (cells, _) = pathfinding::directed::astar::astar(&start, successors, |a| heuristic(*a), |&a| a == goal)
             .ok_or_else(no_path)?;
-        let mut points: Vec<Point> = cells.iter().map(|&c| centre(c)).collect();
+        let mut points: Vec<Point> = cells.iter().map(|&c| self.centre(c)).collect();
         points[0] = request.start;
         *points.last_mut().expect("a path holds its goal") = request.goal;
-        Ok(shortcut(&points, request.obstacles, request.inflation))
+        Ok(points)
     }
 }
 
@@ -183,7 +242,14 @@ mod tests {
     use crate::geometry::{clearance, segment_is_free};
 
     fn request<'a>(obstacles: &'a [Obstacle], inflation: f64) -> PlanRequest<'a> {
-        PlanRequest { start: [0.0, 0.0], goal: [10.0, 0.0], obstacles, inflation, bounds: ([-1.0, -6.0], [11.0, 6.0]) }
+        PlanRequest {
+            start: [0.0, 0.0],
+            goal: [10.0, 0.0],
+            obstacles,
+            inflation,
+            bounds: ([-1.0, -6.0], [11.0, 6.0]),
+            speeds: &[],
+        }
     }
 
     #[test]

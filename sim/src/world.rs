@@ -191,6 +191,7 @@ impl World {
             obstacles: &self.obstacles,
             inflation,
             bounds: self.bounds(),
+            speeds: &[],
         };
         GridAStar::default().plan(&request).map(|_| ()).map_err(|_| WorldError::Infeasible {
             start: self.start,
@@ -380,6 +381,7 @@ impl WorldSpec {
             obstacles: &world.obstacles,
             inflation: self.inflation,
             bounds: world.bounds(),
+            speeds: &[],
         };
         let path = GridAStar::default().plan(&request).ok()?;
         let along = arc_lengths(&path);
@@ -567,6 +569,7 @@ radius = 1.0
                             obstacles: base,
                             inflation,
                             bounds: world.bounds(),
+                            speeds: &[],
                         };
                         let path = GridAStar::default().plan(&request).unwrap();
                         for popup in popups {

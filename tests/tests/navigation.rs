@@ -169,7 +169,7 @@ async fn worlds_generated_for_a_larger_steb_keep_it_clear() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn every_world_family_is_driven_safely_by_parametric_fastrack_and_fastrack() {
+async fn every_world_family_is_driven_safely_by_parametric_fastrack_on_both_paths_and_fastrack() {
     let (_server, simulator) = shipped().await;
     let steb = simulator.steb_radius();
     let mut lines = Vec::new();
@@ -177,7 +177,9 @@ async fn every_world_family_is_driven_safely_by_parametric_fastrack_and_fastrack
     for family in WorldFamily::ALL {
         for seed in 1..=2 {
             let world = WorldSpec { seed, family, inflation: steb, ..WorldSpec::default() }.generate().unwrap();
-            for method in [Method::Parametric, Method::FastrackSlowest, Method::FastrackFastest] {
+            for method in
+                [Method::Parametric, Method::ParametricFastestPath, Method::FastrackSlowest, Method::FastrackFastest]
+            {
                 let run = simulator.spawn_run(world.clone(), method.clone(), seed).await.unwrap().unwrap();
                 let line = format!(
                     "{} on {family} world {seed}: {} after {:.1} s, min clearance {:.3} m",
@@ -186,7 +188,7 @@ async fn every_world_family_is_driven_safely_by_parametric_fastrack_and_fastrack
                     run.time,
                     run.min_clearance
                 );
-                if run.outcome.is_unsafe() || (method == Method::Parametric && run.outcome != Outcome::Reached) {
+                if run.outcome.is_unsafe() || (method.is_parametric() && run.outcome != Outcome::Reached) {
                     unsafe_runs.push(line.clone());
                 }
                 lines.push(line);
@@ -194,6 +196,7 @@ async fn every_world_family_is_driven_safely_by_parametric_fastrack_and_fastrack
         }
     }
     println!("{}", lines.join("\n"));
-    // No collision and no error over the bound in force, on any family, and PF reaches every goal.
+    // No collision and no error over the bound in force, on any family, and PF reaches every goal on both
+    // raw paths.
     assert!(unsafe_runs.is_empty(), "{}", unsafe_runs.join("\n"));
 }

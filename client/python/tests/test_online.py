@@ -267,6 +267,19 @@ def test_a_drop_in_beta_far_from_the_plan_resets_the_planner_inside_the_bound(cl
         assert not loop.replan_flag and loop.raw_path[-1] == (10.0, 0.0)
 
 
+def test_a_tracker_past_the_workspace_edge_is_reset_inside_the_workspace(client: fastrack.Client) -> None:
+    # As above, but the workspace ends at y = 2.2, 0.3 m short of the tracker: its own position is no reset
+    # point (no path would lead back from it), a candidate inside the workspace is.
+    with online(client, bounds=((-2.0, -6.0), (12.0, 2.2))) as loop:
+        loop.step([0.0, 0.0, ALONG_X, 1.0])
+        tracker = [0.0, 2.5, ALONG_X, 1.0]
+        step = loop.step(tracker, [Circle((0.0, 5.5), 0.5)])
+        assert step.branch == "reset", step
+        assert step.planner[1] <= 2.2, "the reset point lies inside the workspace"
+        assert math.hypot(step.planner[0] - tracker[0], step.planner[1] - tracker[1]) <= step.dteb_radius
+        assert step.in_teb and step.value <= step.dteb_radius
+
+
 def held_control(client: fastrack.Client, step: StepReport) -> np.ndarray:
     """``u*`` at the step's relative state under its (held) ``beta_query``, asked of the server directly."""
     n_params = len(client.get_model(MODEL).params)

@@ -66,6 +66,7 @@ impl LevelPlanner {
             obstacles: &self.obstacles,
             inflation,
             bounds: self.context.world.bounds(),
+            speeds: &[],
         };
         Ok(self.path_planner.plan(&request)?.into_iter().skip(1).collect())
     }

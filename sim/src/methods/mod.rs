@@ -22,8 +22,10 @@ use std::sync::Arc;
 /// Which method drives the robot.
 #[derive(Debug, Clone, PartialEq)]
 pub enum Method {
-    /// Parametric FaSTrack (the paper's Alg. 3), `PF`.
+    /// Parametric FaSTrack (the paper's Alg. 3) on the shortest raw path, `PF`.
     Parametric,
+    /// Parametric FaSTrack on the fastest raw path at the speeds the rule allows along it, `PF-fast`.
+    ParametricFastestPath,
     /// FaSTrack at the slowest table `beta` (obstacles inflated by its bound), `F(beta_l)`.
     FastrackSlowest,
     /// FaSTrack at the fastest table `beta`, `F(beta_u)`.
@@ -49,10 +51,16 @@ impl Method {
         ]
     }
 
+    /// Parametric FaSTrack, on either raw path: the methods that must never be unsafe.
+    pub fn is_parametric(&self) -> bool {
+        matches!(self, Method::Parametric | Method::ParametricFastestPath)
+    }
+
     /// Short name, as in the paper's Table 1.
     pub fn label(&self) -> &'static str {
         match self {
             Method::Parametric => "PF",
+            Method::ParametricFastestPath => "PF-fast",
             Method::FastrackSlowest => "F(beta_l)",
             Method::FastrackFastest => "F(beta_u)",
             Method::MetaFastrack { .. } => "MF",
@@ -60,15 +68,16 @@ impl Method {
         }
     }
 
-    /// The method for a name given on the command line: `pf`, `f-low`, `f-high`, `mf`, `mppi`.
+    /// The method for a name given on the command line: `pf`, `pf-fast`, `f-low`, `f-high`, `mf`, `mppi`.
     pub fn parse(name: &str) -> Result<Method, String> {
         match name {
             "pf" => Ok(Method::Parametric),
+            "pf-fast" => Ok(Method::ParametricFastestPath),
             "f-low" => Ok(Method::FastrackSlowest),
             "f-high" => Ok(Method::FastrackFastest),
             "mf" => Ok(Method::MetaFastrack { levels: 3 }),
             "mppi" => Ok(Method::Mppi(MppiSettings::default())),
-            other => Err(format!("unknown method `{other}`; expected pf, f-low, f-high, mf or mppi")),
+            other => Err(format!("unknown method `{other}`; expected pf, pf-fast, f-low, f-high, mf or mppi")),
         }
     }
 }
@@ -160,7 +169,10 @@ impl Controller {
         let start = context.tracker.position(tracker);
         let last = context.speeds.len() - 1;
         Ok(match method {
-            Method::Parametric => Controller::Parametric(Box::new(Parametric::start(context, start).await?)),
+            Method::Parametric => Controller::Parametric(Box::new(Parametric::start(context, start, false).await?)),
+            Method::ParametricFastestPath => {
+                Controller::Parametric(Box::new(Parametric::start(context, start, true).await?))
+            }
             Method::FastrackSlowest => Controller::Levels(Box::new(LevelPlanner::new(context, vec![0], start))),
             Method::FastrackFastest => Controller::Levels(Box::new(LevelPlanner::new(context, vec![last], start))),
             Method::MetaFastrack { levels } => {

@@ -1,14 +1,16 @@
 //! Parametric FaSTrack: the online loop of `fastrack-online`, answered over the server's `Track` stream (or
-//! by the model in this process), with A* on a grid as its raw-path planner.
+//! by the model in this process), with A* on a grid as its raw-path planner: the shortest path, or the
+//! fastest at the speeds the rule allows along it.
 
 use super::{Context, Decision, MethodError};
 use crate::backend::BackendOracle;
 use crate::trace::{LoopTrace, TraceStep, FORMAT};
 use crate::visits::Visit;
 use fastrack_online::core::CoreSettings;
+use fastrack_online::fastest_path::FastestPath;
 use fastrack_online::geometry::{Obstacle, Point};
 use fastrack_online::online_loop::{Branch, OnlineLoop};
-use fastrack_online::raw_path::GridAStar;
+use fastrack_online::raw_path::{GridAStar, RawPathPlanner};
 
 /// Reset candidates a reset asks about before the planner holds.
 pub const RESET_CANDIDATES: usize = 256;
@@ -16,14 +18,20 @@ pub const RESET_CANDIDATES: usize = 256;
 /// Parametric FaSTrack, running.
 pub struct Parametric {
     online: OnlineLoop<BackendOracle>,
-    planner: GridAStar,
+    planner: Box<dyn RawPathPlanner>,
     /// The run's trace, when the context asks for one.
     trace: Option<LoopTrace>,
 }
 
 impl Parametric {
-    /// Opens the loop's oracle (over the service: its `Track` stream) with the planner at `start`.
-    pub async fn start(context: Context, start: Point) -> Result<Self, MethodError> {
+    /// Opens the loop's oracle (over the service: its `Track` stream) with the planner at `start`, planning
+    /// the fastest raw path when `fastest` (else the shortest).
+    pub async fn start(context: Context, start: Point, fastest: bool) -> Result<Self, MethodError> {
+        if fastest && context.trace {
+            return Err(MethodError::Setup(
+                "a loop trace is recorded with the shortest-path planner (the Python port replays it)".into(),
+            ));
+        }
         let settings = CoreSettings {
             control_period: context.control_period,
             goal: context.world.goal,
@@ -43,7 +51,9 @@ impl Parametric {
             start,
             steps: Vec::new(),
         });
-        Ok(Self { online: OnlineLoop::new(oracle, settings, start)?, planner: GridAStar::default(), trace })
+        let planner: Box<dyn RawPathPlanner> =
+            if fastest { Box::new(FastestPath::default()) } else { Box::new(GridAStar::default()) };
+        Ok(Self { online: OnlineLoop::new(oracle, settings, start)?, planner, trace })
     }
 
     /// The run's trace so far (`None` unless the context asked for one).
@@ -61,7 +71,7 @@ impl Parametric {
                 }
             }
         }
-        let report = self.online.step(tracker, sensed, &mut self.planner).await?;
+        let report = self.online.step(tracker, sensed, self.planner.as_mut()).await?;
         if let Some(trace) = &mut self.trace {
             trace.steps.push(TraceStep::new(tracker, new, &report));
         }

@@ -26,7 +26,7 @@ pub(super) struct Args {
     /// Seeded worlds (seeds 1..=N).
     #[arg(long, default_value_t = 20)]
     worlds: u64,
-    /// Methods, comma separated (pf, f-low, f-high, mf, mppi).
+    /// Methods, comma separated (pf, pf-fast, f-low, f-high, mf, mppi).
     #[arg(long, value_delimiter = ',', default_value = "f-low,f-high,mf,pf,mppi")]
     methods: Vec<String>,
     /// Runs at once (each its own connection's stream or calls); decision latencies then include the
@@ -166,13 +166,12 @@ pub(super) fn write_visits(
     Ok(())
 }
 
-/// PF must never collide nor exceed its bound.
+/// PF, on either raw path, must never collide nor exceed its bound.
 fn ensure_pf_safe(methods: &[Method], runs: &[BenchRun]) -> anyhow::Result<()> {
-    let pf = methods.iter().position(|m| *m == Method::Parametric);
     let unsafe_runs: Vec<String> = runs
         .iter()
-        .filter(|r| Some(r.method) == pf && r.run.outcome.is_unsafe())
-        .map(|r| format!("world {}: {}", r.world, r.run.outcome.label()))
+        .filter(|r| methods[r.method].is_parametric() && r.run.outcome.is_unsafe())
+        .map(|r| format!("{} on world {}: {}", methods[r.method].label(), r.world, r.run.outcome.label()))
         .collect();
     anyhow::ensure!(unsafe_runs.is_empty(), "PF was unsafe: {}", unsafe_runs.join("; "));
     Ok(())

@@ -803,12 +803,12 @@ class OnlineLoop:
     def _candidates(
         self, tracker: list[float], position: Point, row: SpeedRow, steb_radius: float
     ) -> tuple[tuple[Point, TrackingControl, int] | None, int]:
-        """The first free reset candidate with ``s - Q p`` in the certified set of ``row`` and the trained
-        domain, with the batch's answer and its index there: the tracker's own position first, then points
+        """The first free reset candidate (inside the workspace, clear of the sTEB) with ``s - Q p`` in the
+        certified set of ``row`` and the trained domain, with the batch's answer and its index there: the tracker's own position first, then points
         of :func:`reset_candidates` in the disc of the row's radius around it, the free ones asked about in one
         ``TrackingControl`` batch. Also returns the calls made."""
         candidates = reset_candidates(position, row.bound, self.reset_candidates)
-        free = [p for p in candidates if clearance(self._obstacles, p) > steb_radius]
+        free = [p for p in candidates if _inside(self.bounds, p) and clearance(self._obstacles, p) > steb_radius]
         if not free:
             return None, 0
         states = np.array([self._relative_state(tracker, p) for p in free])

@@ -1,0 +1,187 @@
+//! A raw-path planner that plans for speed: the cost of a path is its travel time when the planner moves at
+//! the speed the rule will allow there.
+//!
+//! The online loop sets `beta` by queryPlannerControl: the largest table `beta` whose bound fits half the
+//! distance to the nearest sensed obstacle. The shortest path hugs the inflated obstacles, where that rule
+//! allows little more than `beta_l`; a path a few metres longer through open space may be travelled at
+//! `beta_u`. So a step between two cells costs its duration at the speed the rule gives at the lower
+//! clearance of its two ends (the tracker sits near the planner, so its distance to the obstacles is about
+//! the planner's clearance), and the planner's per-axis speed bound makes that duration the step's larger
+//! axis displacement over `beta`. The sTEB inflation stays a hard constraint, as for [`GridAStar`]: only the
+//! cost differs. The path is shortened by line of sight only where the shortcut is no slower.
+//!
+//! [`GridAStar`]: crate::raw_path::GridAStar
+
+use crate::geometry::{clearance, segment_is_free, sub, Obstacle, Point};
+use crate::raw_path::{Cell, CellGrid, PlanError, PlanRequest, RawPathPlanner};
+use fastrack_proto::planner_speed::{query_planner_control, SpeedRow};
+use std::cell::RefCell;
+use std::collections::HashMap;
+
+/// A* on a grid of the plane whose step cost is the step's duration at the speed the rule allows there;
+/// needs the request's TEB table ([`PlanRequest::speeds`]).
+#[derive(Debug, Clone, PartialEq)]
+pub struct FastestPath {
+    /// Cell size (m).
+    pub cell: f64,
+}
+
+impl Default for FastestPath {
+    fn default() -> Self {
+        Self { cell: 0.1 }
+    }
+}
+
+/// Durations are integers: microseconds.
+const TIME_SCALE: f64 = 1e6;
+
+impl RawPathPlanner for FastestPath {
+    fn plan(&mut self, request: &PlanRequest<'_>) -> Result<Vec<Point>, PlanError> {
+        let beta_u = match request.speeds.last() {
+            Some(row) if request.speeds.iter().all(|row| row.beta.is_finite() && row.beta > 0.0) => row.beta,
+            _ => return Err(PlanError::Settings("the fastest path needs the TEB table's rows, each beta > 0".into())),
+        };
+        let grid = CellGrid::new(request, self.cell)?;
+        let speed = SpeedMap { obstacles: request.obstacles, speeds: request.speeds, known: RefCell::default() };
+        let seconds = |a: Point, b: Point| chebyshev(a, b) / speed.at(a).min(speed.at(b));
+        let goal = grid.cell_of(request.goal);
+        let points = grid.search(
+            |a: Cell, b: Cell| (seconds(grid.centre(a), grid.centre(b)) * TIME_SCALE) as u64,
+            |a: Cell| (chebyshev(grid.centre(a), grid.centre(goal)) / beta_u * TIME_SCALE) as u64,
+        )?;
+        Ok(shortcut_in_time(&points, request, |a, b| segment_seconds(a, b, self.cell, &speed)))
+    }
+}
+
+/// The speed the rule allows at a point, by the point's clearance, remembered per point.
+struct SpeedMap<'a> {
+    obstacles: &'a [Obstacle],
+    speeds: &'a [SpeedRow],
+    known: RefCell<HashMap<[u64; 2], f64>>,
+}
+
+impl SpeedMap<'_> {
+    /// queryPlannerControl's `beta` with the point's clearance as the distance to the nearest obstacle.
+    fn at(&self, p: Point) -> f64 {
+        *self.known.borrow_mut().entry(p.map(f64::to_bits)).or_insert_with(|| {
+            let d_obs = (!self.obstacles.is_empty()).then(|| clearance(self.obstacles, p));
+            query_planner_control(self.speeds, d_obs).beta
+        })
+    }
+}
+
+/// The larger axis displacement from `a` to `b`: a planner bounded to `beta` per axis needs this over
+/// `beta` seconds.
+fn chebyshev(a: Point, b: Point) -> f64 {
+    let d = sub(b, a);
+    d[0].abs().max(d[1].abs())
+}
+
+/// Seconds to cross the segment `a`-`b` in pieces of about `cell`, each at the rule's speed at its slower
+/// end.
+fn segment_seconds(a: Point, b: Point, cell: f64, speed: &SpeedMap<'_>) -> f64 {
+    let pieces = (chebyshev(a, b) / cell).ceil().max(1.0) as usize;
+    let at = |k: usize| {
+        let t = k as f64 / pieces as f64;
+        [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]
+    };
+    (0..pieces).map(|k| chebyshev(at(k), at(k + 1)) / speed.at(at(k)).min(speed.at(at(k + 1)))).sum()
+}
+
+/// The path shortened by line of sight where it is no slower: from each kept point, the farthest later
+/// point whose segment keeps the inflation and takes no longer than the path between them.
+fn shortcut_in_time(points: &[Point], request: &PlanRequest<'_>, seconds: impl Fn(Point, Point) -> f64) -> Vec<Point> {
+    let mut kept = vec![points[0]];
+    let mut i = 0;
+    while i + 1 < points.len() {
+        let along = |j: usize| points[i..=j].windows(2).map(|w| seconds(w[0], w[1])).sum::<f64>();
+        let j = (i + 2..points.len())
+            .rev()
+            .find(|&j| {
+                segment_is_free(request.obstacles, points[i], points[j], request.inflation)
+                    && seconds(points[i], points[j]) <= along(j) + 1e-9
+            })
+            .unwrap_or(i + 1);
+        kept.push(points[j]);
+        i = j;
+    }
+    kept
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+    use crate::raw_path::{path_length, GridAStar};
+
+    /// beta 0.5 / 1.0 / 1.5 with bounds 0.3 / 1.0 / 2.0: full speed needs 4 m of clearance.
+    fn table() -> Vec<SpeedRow> {
+        [(0.5, 0.3), (1.0, 1.0), (1.5, 2.0)].map(|(beta, bound)| SpeedRow { beta, bound }).to_vec()
+    }
+
+    fn request<'a>(obstacles: &'a [Obstacle], speeds: &'a [SpeedRow]) -> PlanRequest<'a> {
+        PlanRequest {
+            start: [0.0, 0.0],
+            goal: [20.0, 0.0],
+            obstacles,
+            inflation: 0.3,
+            bounds: ([-1.0, -12.0], [21.0, 12.0]),
+            speeds,
+        }
+    }
+
+    /// Seconds along `path` at the rule's speed, finely sampled.
+    fn travel_seconds(path: &[Point], request: &PlanRequest<'_>) -> f64 {
+        let speed = SpeedMap { obstacles: request.obstacles, speeds: request.speeds, known: RefCell::default() };
+        path.windows(2).map(|w| segment_seconds(w[0], w[1], 0.01, &speed)).sum()
+    }
+
+    #[test]
+    fn with_nothing_sensed_the_path_is_the_straight_line() {
+        let speeds = table();
+        let path = FastestPath::default().plan(&request(&[], &speeds)).unwrap();
+        assert_eq!(path, vec![[0.0, 0.0], [20.0, 0.0]]);
+    }
+
+    #[test]
+    fn a_corridor_between_walls_is_left_for_open_space_when_that_is_faster() {
+        // Two long walls 1.6 m apart along the straight line: inside, the clearance is at most 0.8 m and the
+        // rule allows beta_l; a detour 3-4 m around their ends is crossed at beta_u.
+        let walls = [
+            Obstacle::Rectangle { min: [4.0, 0.8], max: [16.0, 1.0] },
+            Obstacle::Rectangle { min: [4.0, -1.0], max: [16.0, -0.8] },
+        ];
+        let speeds = table();
+        let request = request(&walls, &speeds);
+        let shortest = GridAStar::default().plan(&request).unwrap();
+        let fastest = FastestPath::default().plan(&request).unwrap();
+        let (t_shortest, t_fastest) = (travel_seconds(&shortest, &request), travel_seconds(&fastest, &request));
+        assert!(path_length(&fastest) > path_length(&shortest) + 1.0, "no detour: {fastest:?}");
+        assert!(t_fastest < 0.8 * t_shortest, "fastest {t_fastest:.2} s against shortest {t_shortest:.2} s");
+        for segment in fastest.windows(2) {
+            assert!(segment_is_free(&walls, segment[0], segment[1], 0.3), "{segment:?} cuts the inflation");
+        }
+    }
+
+    #[test]
+    fn where_the_detour_costs_more_than_it_gains_the_path_goes_through() {
+        // A short gap (2 m of walls) costs less at beta_l than a detour around walls 20 m long.
+        let walls = [
+            Obstacle::Rectangle { min: [9.0, 0.8], max: [11.0, 11.0] },
+            Obstacle::Rectangle { min: [9.0, -11.0], max: [11.0, -0.8] },
+        ];
+        let speeds = table();
+        let request = request(&walls, &speeds);
+        let fastest = FastestPath::default().plan(&request).unwrap();
+        assert!(fastest.iter().all(|p| p[1].abs() < 1.0), "the path left the gap: {fastest:?}");
+        let shortest = GridAStar::default().plan(&request).unwrap();
+        assert!(travel_seconds(&fastest, &request) <= travel_seconds(&shortest, &request) + 1e-6);
+    }
+
+    #[test]
+    fn without_a_table_or_with_a_blocked_goal_it_says_why() {
+        assert!(matches!(FastestPath::default().plan(&request(&[], &[])), Err(PlanError::Settings(_))));
+        let on_goal = [Obstacle::Circle { center: [20.0, 0.1], radius: 0.5 }];
+        let speeds = table();
+        assert!(matches!(FastestPath::default().plan(&request(&on_goal, &speeds)), Err(PlanError::GoalBlocked { .. })));
+    }
+}
