@@ -1,7 +1,8 @@
 //! The grid tools on a trained diagonal-mode bundle (one shared `beta`, the dubins4d default): `fastrack-trainer`
 //! trains and exports a tiny dubins4d run, then `fastrack-grid compare` and `verify` (the binaries) read it
 //! against the full two-parameter system they solve and simulate, and the server describes the verified
-//! bundle with every figure of its verification.
+//! bundle with every figure of its verification. A training config's grid solutions are made by spec with
+//! `fastrack-grid solve --config` before the trainer takes them.
 
 use fastrack_client::model_ref;
 use fastrack_e2e::{run_binary as run, tiny_training_config, TestServer};
@@ -122,4 +123,52 @@ async fn compare_and_verify_read_a_diagonal_bundle() {
             );
         }
     }
+}
+
+#[test]
+fn a_training_config_s_grid_solutions_are_solved_by_spec_into_its_store_then_trained_on() {
+    let work = tempfile::tempdir().unwrap();
+    let (config, store, run_dir) =
+        (work.path().join("supervised.toml"), work.path().join("store"), work.path().join("run"));
+    let supervision = format!(
+        r#"
+[supervision]
+weight = 1.0
+points = 64
+store = "{}"
+
+[supervision.solutions]
+system = "double_integrator"
+resolution = [9]
+solves = [{{ beta = 0.5 }}, {{ beta = 1.0 }}]
+
+[supervision.solutions.solver]
+accuracy = "weno5"
+rk = "3"
+cfl = 0.75
+horizon_cap = 0.5
+tolerance = 1e-9
+tracking = true
+"#,
+        path(&store)
+    );
+    let text = tiny_training_config("double_integrator", "full", 3, 0.5, "tiny-supervised") + &supervision;
+    std::fs::write(&config, text).unwrap();
+    let train = ["train", "--config", path(&config), "--run-dir", path(&run_dir)];
+
+    // Before the solutions exist, training refuses, naming the missing solve and the command that makes it.
+    let refused = std::process::Command::new(fastrack_e2e::binary("fastrack-trainer")).args(train).output().unwrap();
+    let said = String::from_utf8_lossy(&refused.stderr);
+    assert!(!refused.status.success(), "{said}");
+    assert!(said.contains("no solution for double_integrator at beta 0.5"), "{said}");
+    assert!(said.contains("fastrack-grid solve --config"), "{said}");
+
+    // `solve --config` solves each spec once; a second call keeps them.
+    let first = run("fastrack-grid", &["solve", "--config", path(&config)]);
+    assert_eq!(first.lines().filter(|l| l.starts_with("solved ")).count(), 2, "{first}");
+    let second = run("fastrack-grid", &["solve", "--config", path(&config)]);
+    assert_eq!(second.lines().filter(|l| l.starts_with("kept ")).count(), 2, "{second}");
+    assert_eq!(std::fs::read_dir(&store).unwrap().count(), 2);
+
+    run("fastrack-trainer", &train);
 }
