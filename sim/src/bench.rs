@@ -85,6 +85,9 @@ pub struct Summary {
     pub out_of_domain: usize,
     /// Control periods, over every run, that the certificate did not cover (see [`Run::uncertified_steps`]).
     pub uncertified_steps: usize,
+    /// Control periods, over every run, whose planner lay within the bound in force of an obstacle (see
+    /// [`Run::exposed_steps`]).
+    pub exposed_steps: usize,
     /// Median and 99th percentile of the decision time per control period.
     pub decision_p50: Duration,
     /// The 99th percentile.
@@ -122,6 +125,7 @@ pub fn summarise(method: &str, runs: &[&Run]) -> Summary {
         round_trips: mean(&|r| r.round_trips),
         out_of_domain: runs.iter().map(|r| r.out_of_domain).sum(),
         uncertified_steps: runs.iter().map(|r| r.uncertified_steps).sum(),
+        exposed_steps: runs.iter().map(|r| r.exposed_steps).sum(),
         decision_p50: rank(0.5).unwrap_or_default(),
         decision_p99: rank(0.99).unwrap_or_default(),
     }
@@ -149,6 +153,7 @@ pub fn table(summaries: &[Summary]) -> MarkdownTable {
         "server calls",
         "steps out of domain",
         "steps past the certificate",
+        "steps the bound reached an obstacle",
         "decision p50 / p99 (ms)",
     ]);
     for s in summaries {
@@ -168,6 +173,7 @@ pub fn table(summaries: &[Summary]) -> MarkdownTable {
             format!("{:.0}", s.round_trips),
             s.out_of_domain.to_string(),
             s.uncertified_steps.to_string(),
+            s.exposed_steps.to_string(),
             format!("{:.3} / {:.3}", s.decision_p50.as_secs_f64() * 1e3, s.decision_p99.as_secs_f64() * 1e3),
         ]);
     }
@@ -226,6 +232,7 @@ pub fn summary_json(s: &Summary) -> Value {
         "time_to_goal_mean_s": s.time_to_goal.map(|t| t.0), "time_to_goal_sd_s": s.time_to_goal.map(|t| t.1),
         "min_clearance_m": s.min_clearance, "largest_error_minus_bound_m": s.worst_excess,
         "replans_mean": s.replans, "resets_mean": s.resets, "held_steps_mean": s.held_steps, "server_calls_mean": s.round_trips, "steps_out_of_domain": s.out_of_domain, "steps_past_the_certificate": s.uncertified_steps,
+        "steps_the_bound_reached_an_obstacle": s.exposed_steps,
         "decision_p50_ms": s.decision_p50.as_secs_f64() * 1e3, "decision_p99_ms": s.decision_p99.as_secs_f64() * 1e3,
     })
 }

@@ -146,6 +146,11 @@ pub struct Run {
     /// set of the row in force for the verification horizon or longer.
     #[serde(default)]
     pub uncertified_steps: usize,
+    /// Control periods whose planner lay no farther from an obstacle of the true map than the bound in force:
+    /// the tracker, anywhere within the bound of the planner, then had no proof of clearance (what a hold
+    /// under a larger old bound can lead to; a collision-free run may still have some).
+    #[serde(default)]
+    pub exposed_steps: usize,
     /// The method's decision time per control period, server calls included.
     #[serde(with = "nanoseconds")]
     pub decision_times: Vec<Duration>,
@@ -296,6 +301,7 @@ impl Simulator {
             round_trips: 0,
             out_of_domain: 0,
             uncertified_steps: 0,
+            exposed_steps: 0,
             decision_times: Vec::new(),
             sensor_range: self.sensor.range,
             steb_radius: self.steb_radius(),
@@ -348,6 +354,9 @@ impl Simulator {
                 if (t / disturbance.period).floor() != ((t - control_period) / disturbance.period).floor() || k == 0 {
                     push = disturbance.draw(&mut rng);
                 }
+            }
+            if let (Some(planner), Some(bound)) = (decision.planner, decision.bound) {
+                run.exposed_steps += usize::from(clearance(&world.obstacles, planner) <= bound);
             }
             let (mut period_clearance, mut period_error) = (f64::INFINITY, None::<f64>);
             let mut failure = None;

@@ -34,7 +34,7 @@ pub(super) struct Args {
 fn run_line(run: &Run) -> String {
     let latency = LatencySummary::from_latencies(&mut run.decision_times.clone());
     format!(
-        "{}: {} after {:.2} s; min clearance {:.3} m; largest error - bound {}; replans {}, resets {}, held steps {}, server calls {}, steps out of domain {}, steps past the certificate {}; decision p50 {:.3} ms, p99 {:.3} ms{}",
+        "{}: {} after {:.2} s; min clearance {:.3} m; largest error - bound {}; replans {}, resets {}, held steps {}, server calls {}, steps out of domain {}, steps past the certificate {}, steps the bound reached an obstacle {}; decision p50 {:.3} ms, p99 {:.3} ms{}",
         run.method,
         run.outcome.label(),
         run.time,
@@ -46,6 +46,7 @@ fn run_line(run: &Run) -> String {
         run.round_trips,
         run.out_of_domain,
         run.uncertified_steps,
+        run.exposed_steps,
         latency.p50.as_secs_f64() * 1e3,
         latency.p99.as_secs_f64() * 1e3,
         match &run.outcome {
@@ -73,7 +74,8 @@ pub(super) async fn run(client: &FastrackClient, args: Args, json_mode: bool) ->
         json_mode,
         json!({"method": run.method, "outcome": run.outcome.label(), "time_s": run.time, "min_clearance_m": run.min_clearance,
                "largest_error_minus_bound_m": run.worst_excess, "replans": run.replans, "resets": run.resets, "held_steps": run.held_steps,
-               "server_calls": run.round_trips, "steps_out_of_domain": run.out_of_domain, "steps_past_the_certificate": run.uncertified_steps, "plot": args.plot, "plot_over_time": over}),
+               "server_calls": run.round_trips, "steps_out_of_domain": run.out_of_domain, "steps_past_the_certificate": run.uncertified_steps,
+               "steps_the_bound_reached_an_obstacle": run.exposed_steps, "plot": args.plot, "plot_over_time": over}),
         || format!("{}\nfigures: {} and {}", run_line(&run), args.plot.display(), over.display()),
     );
     anyhow::ensure!(!run.outcome.is_unsafe(), "the run was unsafe: {}", run.outcome.label());
