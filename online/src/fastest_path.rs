@@ -91,15 +91,21 @@ fn segment_seconds(a: Point, b: Point, cell: f64, speed: &SpeedMap<'_>) -> f64 {
 /// The path shortened by line of sight where it is no slower: from each kept point, the farthest later
 /// point whose segment keeps the inflation and takes no longer than the path between them.
 fn shortcut_in_time(points: &[Point], request: &PlanRequest<'_>, seconds: impl Fn(Point, Point) -> f64) -> Vec<Point> {
+    // Seconds from the first point to each point along the path.
+    let elapsed: Vec<f64> = std::iter::once(0.0)
+        .chain(points.windows(2).scan(0.0, |total, w| {
+            *total += seconds(w[0], w[1]);
+            Some(*total)
+        }))
+        .collect();
     let mut kept = vec![points[0]];
     let mut i = 0;
     while i + 1 < points.len() {
-        let along = |j: usize| points[i..=j].windows(2).map(|w| seconds(w[0], w[1])).sum::<f64>();
         let j = (i + 2..points.len())
             .rev()
             .find(|&j| {
                 segment_is_free(request.obstacles, points[i], points[j], request.inflation)
-                    && seconds(points[i], points[j]) <= along(j) + 1e-9
+                    && seconds(points[i], points[j]) <= elapsed[j] - elapsed[i] + 1e-9
             })
             .unwrap_or(i + 1);
         kept.push(points[j]);
