@@ -85,8 +85,8 @@ async fn the_loops_visits_are_recorded_and_verified_as_the_operational_distribut
     let results = at("results");
     let verify = |states: &str| {
         Command::new(fastrack_e2e::binary("fastrack-grid"))
-            .args(["verify", "--bundle", bundle.to_str().unwrap(), "--betas", "1.25", "--eps", "0.5"])
-            .args(["--delta", "0.5", "--horizon", "0.5", "--step", "0.05", "--results-dir", &results])
+            .args(["verify", "--bundle", bundle.to_str().unwrap(), "--betas", "1.25", "--eps", "0.2"])
+            .args(["--delta", "0.2", "--horizon", "0.5", "--step", "0.05", "--results-dir", &results])
             .args(["--record", "operational", "--out", &at("verified"), "--operational-states", states])
             .output()
             .unwrap()
@@ -98,7 +98,7 @@ async fn the_loops_visits_are_recorded_and_verified_as_the_operational_distribut
     let checks = &record["figures"]["rows"][0]["verification"]["checks"];
     let names: Vec<&str> = checks.as_array().unwrap().iter().map(|c| c["distribution"].as_str().unwrap()).collect();
     assert_eq!(names, ["uniform", "zero-error-slice", "operational", "falsification"], "{checks}");
-    assert_eq!(checks[2]["samples"], 7, "N = ceil((2 / 0.5) (ln 2 + 1)) draws: {checks}");
+    assert_eq!(checks[2]["samples"], 8, "N = ceil(ln 0.2 / ln 0.8) draws: {checks}");
     assert_eq!(record["config"]["operational_recorded"]["states"], lines.len());
     // Beside it, the states recorded while this row was in force and how many of them left its set.
     let in_force = &record["figures"]["rows"][0]["rounds"][0]["in_force"];

@@ -83,7 +83,7 @@ fn a_verification_in_shards_merges_into_the_single_run() {
     let (results, parts) = (at("results"), at("parts"));
     // Few samples over a short horizon: the same work either way, in seconds.
     let verify = |extra: &[&str]| {
-        let mut args = vec!["verify", "--bundle", bundle.to_str().unwrap(), "--eps", "0.5", "--delta", "0.5"];
+        let mut args = vec!["verify", "--bundle", bundle.to_str().unwrap(), "--eps", "0.2", "--delta", "0.2"];
         args.extend(["--horizon", "0.5", "--step", "0.05", "--results-dir", &results]);
         args.extend_from_slice(extra);
         run_binary("fastrack-grid", &args)
@@ -106,7 +106,7 @@ fn a_verification_in_shards_merges_into_the_single_run() {
         serde_json::from_slice::<Value>(&text).unwrap()["teb_table"].clone()
     };
     assert_eq!(manifest("whole"), manifest("merged"));
-    assert!(manifest("whole")[0]["verification"]["samples"].as_u64() == Some(7), "{}", manifest("whole")[0]);
+    assert!(manifest("whole")[0]["verification"]["samples"].as_u64() == Some(8), "{}", manifest("whole")[0]);
     let (single, merged) = (record(Path::new(&results), "whole"), record(Path::new(&results), "merged"));
     assert_eq!(
         (&single["config"], without_wall_times(&single["figures"])),

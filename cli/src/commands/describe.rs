@@ -115,7 +115,7 @@ fn verification_json(v: &pb::Verification) -> Value {
             "violations": c.violations, "max_error": c.max_error})).collect::<Vec<_>>()})
 }
 
-/// `eps 0.001, delta 1e-6, N 29632, 0 violations, 2 rounds (set), 10 s; hardest model-worst-case`, then where
+/// `eps 0.001, delta 1e-6, N 13809, 0 violations, 2 rounds (set), 10 s; hardest model-worst-case`, then where
 /// they were recorded `; checks <distribution> <samples>/<violations>/<largest error>, ...`.
 fn verification_text(v: &pb::Verification) -> String {
     let hardest = v.planners.iter().max_by(|a, b| a.max_error.total_cmp(&b.max_error));

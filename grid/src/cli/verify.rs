@@ -244,7 +244,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .map(|p| format::load(p).with_context(|| format!("loading the grid solution {}", p.display())))
         .collect::<anyhow::Result<_>>()?;
     println!(
-        "N = ceil((2 / {}) (ln(1 / {}) + 1)) = {} samples per row",
+        "N = ceil(ln({1}) / ln(1 - {0})) = {2} samples per check and row",
         args.eps,
         args.delta,
         required_samples(args.eps, args.delta)
