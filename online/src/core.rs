@@ -28,13 +28,16 @@ pub enum Branch {
     /// planner moved along the raw path at `beta_old`, whose row stays in force; the rise is tried again at
     /// the next step.
     Steady,
-    /// `beta_query < beta_old` and `s - Q p*` in the certified set of `beta_query`: the planner jumped to `p*`.
+    /// `beta_query < beta_old` and `s - Q p*` in the certified set of `beta_query`, with `p*` farther than
+    /// `dTEBmax` from every sensed obstacle: the planner jumped to `p*`.
     Keep,
-    /// `beta_query < beta_old` and `s - Q p*` outside that set: the planner was reset into it, a replan flagged.
+    /// `beta_query < beta_old` and `p*` not kept: the planner was reset into that set, to a free state farther
+    /// than `dTEBmax` from every sensed obstacle, a replan flagged.
     Reset,
-    /// `beta_query < beta_old` and no free planner state within `dTEBmax` of the tracker puts `s - Q p` in
-    /// that set: the planner waits where it is (a planner at rest obeys every speed bound), `beta_old` and its
-    /// bound stay in force, and the drop is tried again at the next step.
+    /// The planner waits where it is (a planner at rest obeys every speed bound), `beta_old` and its bound stay
+    /// in force, and the step's `beta` is tried again at the next step: on a drop, when no free planner state
+    /// within `dTEBmax` of the tracker puts `s - Q p` in the smaller set; on a rise or an advance, when one
+    /// period along the raw path would bring the planner within the bound of a sensed obstacle.
     Hold,
 }
 
@@ -416,6 +419,11 @@ impl LoopCore {
         }
         let p = if speed.beta < beta_old {
             let (index, p_star) = self.closest_path_state(position);
+            if !self.clears(p_star, speed.dteb_radius) {
+                // A planner at p* would not keep the smaller bound clear of the sensed obstacles: reset.
+                step.round_trips = 0;
+                return self.ask_candidates(step);
+            }
             step.stage = Stage::Keep { index, p_star };
             p_star
         } else {
@@ -423,6 +431,12 @@ impl LoopCore {
             // starts from the same planner state and path.
             let mut ahead = self.raw_path.clone();
             let p_next = advance_along(self.planner, &mut ahead, speed.beta * self.settings.control_period);
+            if !self.clears(p_next, speed.dteb_radius) {
+                // One period along the path would bring the planner within the bound of a sensed obstacle: on
+                // a rise it moves at beta_old instead, otherwise it waits where it is.
+                step.round_trips = 0;
+                return if speed.beta > beta_old { self.steady(step) } else { self.hold(step) };
+            }
             step.stage = Stage::Advance { p_next, ahead, rising: speed.beta > beta_old };
             p_next
         };
@@ -454,16 +468,23 @@ impl LoopCore {
             .unwrap_or((0, self.planner))
     }
 
-    /// Free reset candidates: [`reset_candidates`] around the tracker's position, those inside the workspace
-    /// and farther than the sTEB from every sensed obstacle (a planner reset outside the workspace, where a
-    /// tracker may overshoot its edge, could plan no path back).
-    fn free_candidates(&self, position: Point, radius: f64, steb_radius: f64) -> Vec<Point> {
+    /// Free reset candidates for a row of bound `bound`: [`reset_candidates`] in the disc of that radius
+    /// around the tracker's position, those inside the workspace (a planner reset outside it, where a tracker
+    /// may overshoot its edge, could plan no path back) and farther than the sTEB and the row's bound from
+    /// every sensed obstacle.
+    fn free_candidates(&self, position: Point, bound: f64, steb_radius: f64) -> Vec<Point> {
         let (lo, hi) = self.settings.bounds;
         let inside = |p: Point| p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1];
-        reset_candidates(position, radius, self.settings.reset_candidates)
+        reset_candidates(position, bound, self.settings.reset_candidates)
             .into_iter()
-            .filter(|&candidate| inside(candidate) && clearance(&self.obstacles, candidate) > steb_radius)
+            .filter(|&candidate| inside(candidate) && self.clears(candidate, bound.max(steb_radius)))
             .collect()
+    }
+
+    /// True when `p` lies farther than `bound` from every sensed obstacle: a tracker within `bound` of a
+    /// planner at `p` touches none of them.
+    fn clears(&self, p: Point, bound: f64) -> bool {
+        clearance(&self.obstacles, p) > bound
     }
 
     /// The row answering for `beta_old` in the current table (only a table replaced under the loop can end
@@ -471,6 +492,21 @@ impl LoopCore {
     fn row_in_force(&self, beta_old: f64) -> Result<SpeedRow, CoreError> {
         let beta_u = self.view.speeds.last().map_or(f64::NAN, |row| row.beta);
         row_for(&self.view.speeds, beta_old).map(|i| self.view.speeds[i]).ok_or(CoreError::NoRow { beta_old, beta_u })
+    }
+
+    /// A refused rise: the planner moves along the raw path at `beta_old`, under its row, whose certificate
+    /// still runs, or waits where it is if that would bring it within the row's bound of a sensed obstacle.
+    fn steady(&self, mut step: Step) -> Result<Step, CoreError> {
+        let row = self.row_in_force(step.beta_old)?;
+        let mut ahead = self.raw_path.clone();
+        let p_next = advance_along(self.planner, &mut ahead, row.beta * self.settings.control_period);
+        if !self.clears(p_next, row.bound) {
+            return self.hold(step);
+        }
+        step.query = Query::Batch { states: self.relative_state(&step.tracker, p_next), beta: row.beta };
+        step.stage = Stage::Steady { p_next, ahead, row };
+        step.round_trips += 1;
+        Ok(step)
     }
 
     /// The hold's question: the held planner state's relative state under the row answering for `beta_old`.
@@ -536,17 +572,8 @@ impl Step {
             Stage::Advance { p_next, ahead, rising } => {
                 let answer = single()?;
                 if rising && !answer.in_set {
-                    // The faster row's certificate does not cover the new state: move at beta_old instead,
-                    // under its row, whose certificate still runs.
-                    let row = row_for(&core.view.speeds, self.beta_old)
-                        .map(|i| core.view.speeds[i])
-                        .ok_or(CoreError::NoRow { beta_old: self.beta_old, beta_u: self.speed.beta })?;
-                    let mut ahead = core.raw_path.clone();
-                    let p_next = advance_along(core.planner, &mut ahead, row.beta * core.settings.control_period);
-                    self.query = Query::Batch { states: core.relative_state(&self.tracker, p_next), beta: row.beta };
-                    self.stage = Stage::Steady { p_next, ahead, row };
-                    self.round_trips += 1;
-                    return Ok(Progress::Ask(self));
+                    // The faster row's certificate does not cover the new state.
+                    return core.steady(self).map(Progress::Ask);
                 }
                 core.raw_path = ahead;
                 Ok(core.done(self, Branch::Advance, p_next, answer, None))
@@ -718,6 +745,61 @@ mod tests {
     }
 
     #[test]
+    fn an_advance_that_would_bring_the_planner_within_the_bound_of_an_obstacle_holds() {
+        let mut core = core();
+        run(&mut core, &[0.0; 4], &[], true, true);
+        // The tracker 3.5 m behind, 4.5 m from the obstacle: the rule keeps beta 1.5, but one period along the
+        // path would put the planner 1.2 m from the obstacle's edge, inside the bound of 1.5.
+        let (report, asked) = run(&mut core, &[-3.0, 0.0, 0.0, 0.0], &[OBSTACLE], true, true);
+        assert_eq!((report.branch, report.beta_query, report.dteb_radius), (Branch::Hold, 1.5, 1.5));
+        assert!((report.planner[0] - 0.15).abs() < 1e-12 && report.round_trips == 1, "{report:?}");
+        assert!(matches!(asked[..], [Query::Batch { beta, .. }] if beta == 1.5), "{asked:?}");
+        assert!(clearance(core.obstacles(), core.planner()) > 0.0);
+    }
+
+    #[test]
+    fn a_rise_that_would_bring_the_planner_within_the_faster_bound_of_an_obstacle_moves_at_beta_old() {
+        let mut core = core();
+        run(&mut core, &[0.0; 4], &[], true, true);
+        run(&mut core, &[0.1, 0.0, 0.0, 0.0], &[OBSTACLE], true, true);
+        assert_eq!(core.beta_in_force(), 0.5);
+        // The tracker far behind allows 1.5, but the planner, 1.35 m from the obstacle's edge, would not keep
+        // 1.5 clear of it: it moves on at 0.5 without asking about the faster row.
+        let (report, asked) = run(&mut core, &[-20.0, 0.0, 0.0, 0.0], &[], true, true);
+        assert_eq!((report.branch, report.beta_query, report.round_trips), (Branch::Steady, 0.5, 1));
+        assert!(matches!(asked[..], [Query::Batch { beta: 0.5, .. }]), "{asked:?}");
+        assert!((report.planner[0] - 0.2).abs() < 1e-12, "{:?}", report.planner);
+    }
+
+    #[test]
+    fn a_drop_whose_closest_path_state_lies_within_the_smaller_bound_of_an_obstacle_resets() {
+        let mut core = core();
+        run(&mut core, &[0.0; 4], &[], true, true);
+        // The planner at (0.15, 0), 0.4 m from the obstacle's edge; the tracker 1.04 m from it: beta 0.5, whose
+        // bound 0.5 a planner kept at p* would not keep clear.
+        let obstacle = Obstacle::Circle { center: [0.15, 0.8], radius: 0.4 };
+        let (report, asked) = run(&mut core, &[-1.05, 0.0, 0.0, 0.0], &[obstacle], true, true);
+        assert_eq!((report.branch, report.beta_query, report.round_trips), (Branch::Reset, 0.5, 2));
+        assert!(matches!(asked[..], [Query::Batch { .. }, Query::Tick { .. }]), "no keep asked: {asked:?}");
+        assert!(clearance(core.obstacles(), report.planner) > 0.5, "{:?}", report.planner);
+    }
+
+    #[test]
+    fn reset_candidates_keep_the_rows_bound_clear_of_sensed_obstacles() {
+        let mut core = core();
+        run(&mut core, &[0.0; 4], &[OBSTACLE], true, true);
+        let (position, bound, steb) = ([0.6, 0.0], 1.0, 0.5);
+        let free = core.free_candidates(position, bound, steb);
+        assert!(!free.is_empty());
+        assert!(free.iter().all(|&p| clearance(core.obstacles(), p) > bound), "{free:?}");
+        let between = reset_candidates(position, bound, core.settings.reset_candidates)
+            .into_iter()
+            .filter(|&p| (steb..=bound).contains(&clearance(core.obstacles(), p)))
+            .count();
+        assert!(between > 0, "some candidate clears the sTEB but not the bound, and is left out");
+    }
+
+    #[test]
     fn a_drop_outside_the_set_resets_into_it_and_plans_again() {
         let mut core = core();
         run(&mut core, &[0.0; 4], &[], true, true);
@@ -763,7 +845,9 @@ mod tests {
     fn a_rise_whose_state_the_faster_set_does_not_hold_moves_at_beta_old() {
         let mut core = core();
         run(&mut core, &[0.0; 4], &[], true, true);
-        run(&mut core, &[0.1, 0.0, 0.0, 0.0], &[OBSTACLE], true, true);
+        // Beside the path, 1.6 m from the planner: far enough for the planner to move on under beta 1.5.
+        let beside = Obstacle::Circle { center: [0.1, -2.1], radius: 0.5 };
+        run(&mut core, &[0.1, 0.0, 0.0, 0.0], &[beside], true, true);
         assert_eq!(core.beta_in_force(), 0.5);
         // Far from the obstacle: the rule allows 1.5 again, but the state lies outside that row's set.
         let planner = core.planner();

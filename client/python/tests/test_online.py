@@ -248,6 +248,23 @@ def test_a_drop_in_beta_keeps_p_star_when_the_tracker_is_inside_the_smaller_boun
         assert not again.replanned and again.branch == "advance" and again.beta_old == step.beta_query
 
 
+def test_a_move_that_would_bring_the_planner_within_the_bound_of_an_obstacle_holds(client: fastrack.Client) -> None:
+    with online(client) as loop:
+        first = loop.step([0.0, 0.0, ALONG_X, 1.0])
+        bound = first.dteb_radius
+        # An obstacle whose edge lies 0.3 m inside beta_u's bound of the planner, the tracker so far behind it
+        # that the half-distance rule still allows beta_u: one more period along the path would leave the
+        # planner within the bound of the obstacle, so it waits where it is under the row in force.
+        edge = first.planner[0] + bound - 0.3
+        obstacle = Circle((edge + 0.5, 0.0), 0.5)
+        tracker = [edge - 2.0 * bound - 0.5, 0.0, ALONG_X, 1.0]
+        step = loop.step(tracker, [obstacle])
+        assert step.beta_query == step.beta_old == first.beta_query, step
+        assert step.branch == "hold" and step.round_trips == 1, step
+        np.testing.assert_allclose(step.planner, first.planner, rtol=0, atol=0)
+        assert clearance([obstacle], (float(step.planner[0]), float(step.planner[1]))) > 0.0
+
+
 def test_a_drop_in_beta_far_from_the_plan_resets_the_planner_inside_the_bound(client: fastrack.Client) -> None:
     with online(client) as loop:
         loop.step([0.0, 0.0, ALONG_X, 1.0])

@@ -21,7 +21,9 @@ Each :meth:`OnlineLoop.step` takes the tracker state and the obstacles sensed no
    except on a rise whose new relative state the faster row's certified set does not hold: then it moves at
    ``beta_old``, whose row stays in force (branch ``"steady"``); and when the relative state has stayed outside
    the certified set of the row in force for half the verification horizon, the planner is reset into it
-   under that row, a rise waiting for the next step (or holds);
+   under that row, a rise waiting for the next step (or holds). Every planner state a step ends with lies
+   farther than the bound then in force from every sensed obstacle: a keep, a reset point or a move that
+   would not is refused (a move on a rise then goes at ``beta_old``; otherwise the planner holds);
 5. reads ``u*`` at ``r_next = s - Q p_next`` under ``beta_query`` (``beta_old`` on a hold or a steady step).
 
 The tick that carries ``p_next`` (or the candidate ``p*``) returns ``beta_query``, the bound's membership
@@ -80,8 +82,9 @@ path; on a rise only when the faster row's certified set holds the new relative 
 (``beta_query > beta_old`` but that set does not hold it: the planner moved at ``beta_old``, whose row stays
 in force), ``"keep"`` (``beta_query < beta_old`` and ``s - Q p*`` in the certified set of ``beta_query``: the
 planner jumped to ``p*``), ``"reset"`` (``s - Q p*`` outside it: the planner was reset to a free point inside
-it, a replan flagged), ``"hold"`` (no free point within ``dTEBmax`` of the tracker puts the relative state in
-it: the planner waited where it is, ``beta_old`` and its bound still in force)."""
+it, a replan flagged), ``"hold"`` (the planner waited where it is, ``beta_old`` and its bound still in force:
+no free point within ``dTEBmax`` of the tracker puts the relative state in it, or a move would have brought
+the planner within the bound of a sensed obstacle)."""
 
 
 # --- errors -------------------------------------------------------------------------------------------------
@@ -671,9 +674,12 @@ class OnlineLoop:
             return self._reanchor(tracker, position, d_obs, beta_old, speed, replanned)
         if speed.beta < beta_old:
             index, p_star = self._closest_path_state(position)
-            round_trips += 1
-            reply = self._tick(tracker, p_star, d_obs, speed.beta)
-            if reply.in_teb:
+            reply = None
+            # A planner kept at p* must keep the smaller bound clear of the sensed obstacles.
+            if clearance(self._obstacles, p_star) > speed.dteb_radius:
+                round_trips += 1
+                reply = self._tick(tracker, p_star, d_obs, speed.beta)
+            if reply is not None and reply.in_teb:
                 for _ in range(index):
                     self._raw_path.popleft()
                 branch, p_next = "keep", p_star
@@ -692,6 +698,12 @@ class OnlineLoop:
             # starts from the same planner state and path.
             ahead = deque(self._raw_path)
             p_next = advance_along(self._planner_state, ahead, speed.beta * self.control_period)
+            if clearance(self._obstacles, p_next) <= speed.dteb_radius:
+                # One period along the path would bring the planner within the bound of a sensed obstacle: on
+                # a rise it moves at beta_old instead, otherwise it waits where it is.
+                if speed.beta > beta_old:
+                    return self._steady(tracker, d_obs, beta_old, speed, replanned, 0)
+                return self._hold(tracker, d_obs, beta_old, speed, replanned, 0)
             round_trips += 1
             reply = self._tick(tracker, p_next, d_obs, speed.beta)
             if speed.beta > beta_old and not reply.in_teb:
@@ -733,15 +745,18 @@ class OnlineLoop:
         replanned: bool,
         round_trips: int,
     ) -> StepReport:
-        """A refused rise: the faster row's certified set does not hold the new relative state, so the planner
-        moves along the raw path at ``beta_old`` and ``u*`` is read under its row, whose certificate still
-        runs."""
+        """A refused rise (the faster row's certified set does not hold the new relative state, or the planner
+        would not keep its bound clear of the sensed obstacles): the planner moves along the raw path at
+        ``beta_old`` and ``u*`` is read under its row, whose certificate still runs; or it waits where it is
+        (a hold) if that would bring it within the row's bound of a sensed obstacle."""
         index = row_for(self._speeds, beta_old)
         if index is None:
             raise TableMismatch(local=beta_old, server=self._speeds[-1].beta)
         row = self._speeds[index]
         ahead = deque(self._raw_path)
         p_next = advance_along(self._planner_state, ahead, row.beta * self.control_period)
+        if clearance(self._obstacles, p_next) <= row.bound:
+            return self._hold(tracker, d_obs, beta_old, speed, replanned, round_trips)
         r = self._relative_state(tracker, p_next)
         params = np.full((1, self._n_params), row.beta)
         answer = self.client.tracking_control(self.model, [r], params, out_of_domain="flag", version=self.version)
@@ -803,12 +818,14 @@ class OnlineLoop:
     def _candidates(
         self, tracker: list[float], position: Point, row: SpeedRow, steb_radius: float
     ) -> tuple[tuple[Point, TrackingControl, int] | None, int]:
-        """The first free reset candidate (inside the workspace, clear of the sTEB) with ``s - Q p`` in the
+        """The first free reset candidate (inside the workspace, farther than the sTEB and the row's bound from
+        every sensed obstacle) with ``s - Q p`` in the
         certified set of ``row`` and the trained domain, with the batch's answer and its index there: the tracker's own position first, then points
         of :func:`reset_candidates` in the disc of the row's radius around it, the free ones asked about in one
         ``TrackingControl`` batch. Also returns the calls made."""
         candidates = reset_candidates(position, row.bound, self.reset_candidates)
-        free = [p for p in candidates if _inside(self.bounds, p) and clearance(self._obstacles, p) > steb_radius]
+        keep = max(steb_radius, row.bound)
+        free = [p for p in candidates if _inside(self.bounds, p) and clearance(self._obstacles, p) > keep]
         if not free:
             return None, 0
         states = np.array([self._relative_state(tracker, p) for p in free])
