@@ -88,10 +88,22 @@ pub struct Summary {
     /// Control periods, over every run, whose planner lay within the bound in force of an obstacle (see
     /// [`Run::exposed_steps`]).
     pub exposed_steps: usize,
+    /// Share of the time with each planner speed bound in use, `(beta, share)` by increasing `beta` (empty
+    /// for a method without one).
+    pub beta_shares: Vec<(f64, f64)>,
+    /// Mean and 99th percentile of the wall time per replan of the raw path (ms).
+    pub planning_ms: Option<(f64, f64)>,
     /// Median and 99th percentile of the decision time per control period.
     pub decision_p50: Duration,
     /// The 99th percentile.
     pub decision_p99: Duration,
+}
+
+impl Summary {
+    /// The planner speed bound in use, averaged over time (`None` for a method without one).
+    pub fn mean_beta(&self) -> Option<f64> {
+        (!self.beta_shares.is_empty()).then(|| self.beta_shares.iter().map(|(beta, share)| beta * share).sum())
+    }
 }
 
 /// Summarises the runs of one method.
@@ -109,6 +121,21 @@ pub fn summarise(method: &str, runs: &[&Run]) -> Summary {
         decisions.get(((q * decisions.len() as f64).ceil() as usize).clamp(1, decisions.len().max(1)) - 1).copied()
     };
     let mean = |f: &dyn Fn(&Run) -> usize| runs.iter().map(|r| f(r) as f64).sum::<f64>() / runs.len().max(1) as f64;
+    let mut beta_shares: Vec<(f64, f64)> = Vec::new();
+    for &(beta, seconds) in runs.iter().flat_map(|r| &r.beta_seconds) {
+        match beta_shares.binary_search_by(|(b, _)| b.total_cmp(&beta)) {
+            Ok(i) => beta_shares[i].1 += seconds,
+            Err(i) => beta_shares.insert(i, (beta, seconds)),
+        }
+    }
+    let total: f64 = beta_shares.iter().map(|(_, s)| s).sum();
+    beta_shares.iter_mut().for_each(|(_, s)| *s /= total);
+    let mut plans: Vec<f64> = runs.iter().flat_map(|r| &r.planning_times).map(|t| t.as_secs_f64() * 1e3).collect();
+    plans.sort_by(f64::total_cmp);
+    let planning_ms = (!plans.is_empty()).then(|| {
+        let p99 = plans[((0.99 * plans.len() as f64).ceil() as usize).clamp(1, plans.len()) - 1];
+        (plans.iter().sum::<f64>() / plans.len() as f64, p99)
+    });
     Summary {
         method: method.to_string(),
         runs: runs.len(),
@@ -126,6 +153,8 @@ pub fn summarise(method: &str, runs: &[&Run]) -> Summary {
         out_of_domain: runs.iter().map(|r| r.out_of_domain).sum(),
         uncertified_steps: runs.iter().map(|r| r.uncertified_steps).sum(),
         exposed_steps: runs.iter().map(|r| r.exposed_steps).sum(),
+        beta_shares,
+        planning_ms,
         decision_p50: rank(0.5).unwrap_or_default(),
         decision_p99: rank(0.99).unwrap_or_default(),
     }
@@ -154,6 +183,8 @@ pub fn table(summaries: &[Summary]) -> MarkdownTable {
         "steps out of domain",
         "steps past the certificate",
         "steps the bound reached an obstacle",
+        "mean beta (m/s)",
+        "planning per replan, mean / p99 (ms)",
         "decision p50 / p99 (ms)",
     ]);
     for s in summaries {
@@ -174,8 +205,27 @@ pub fn table(summaries: &[Summary]) -> MarkdownTable {
             s.out_of_domain.to_string(),
             s.uncertified_steps.to_string(),
             s.exposed_steps.to_string(),
+            s.mean_beta().map_or("-".into(), |b| format!("{b:.3}")),
+            s.planning_ms.map_or("-".into(), |(mean, p99)| format!("{mean:.2} / {p99:.2}")),
             format!("{:.3} / {:.3}", s.decision_p50.as_secs_f64() * 1e3, s.decision_p99.as_secs_f64() * 1e3),
         ]);
+    }
+    table
+}
+
+/// The share of the time (%) each method spent at each planner speed bound, a column per `beta` any of them
+/// used.
+pub fn beta_share_table(summaries: &[Summary]) -> MarkdownTable {
+    let mut betas: Vec<f64> = summaries.iter().flat_map(|s| s.beta_shares.iter().map(|(b, _)| *b)).collect();
+    betas.sort_by(f64::total_cmp);
+    betas.dedup();
+    let headers: Vec<String> =
+        std::iter::once("method".to_string()).chain(betas.iter().map(|b| format!("beta {b}"))).collect();
+    let mut table = MarkdownTable::new(&headers.iter().map(String::as_str).collect::<Vec<_>>());
+    for s in summaries.iter().filter(|s| !s.beta_shares.is_empty()) {
+        let share = |beta: f64| s.beta_shares.iter().find(|(b, _)| *b == beta).map(|(_, share)| *share);
+        let cells = betas.iter().map(|&b| share(b).map_or("-".into(), |x| format!("{:.1}", 100.0 * x)));
+        table.row(std::iter::once(s.method.clone()).chain(cells).collect());
     }
     table
 }
@@ -233,6 +283,9 @@ pub fn summary_json(s: &Summary) -> Value {
         "min_clearance_m": s.min_clearance, "largest_error_minus_bound_m": s.worst_excess,
         "replans_mean": s.replans, "resets_mean": s.resets, "held_steps_mean": s.held_steps, "server_calls_mean": s.round_trips, "steps_out_of_domain": s.out_of_domain, "steps_past_the_certificate": s.uncertified_steps,
         "steps_the_bound_reached_an_obstacle": s.exposed_steps,
+        "mean_beta": s.mean_beta(),
+        "beta_shares": s.beta_shares.iter().map(|(beta, share)| json!({"beta": beta, "share": share})).collect::<Vec<_>>(),
+        "planning_ms_mean": s.planning_ms.map(|p| p.0), "planning_ms_p99": s.planning_ms.map(|p| p.1),
         "decision_p50_ms": s.decision_p50.as_secs_f64() * 1e3, "decision_p99_ms": s.decision_p99.as_secs_f64() * 1e3,
     })
 }

@@ -154,6 +154,12 @@ pub struct Run {
     /// The method's decision time per control period, server calls included.
     #[serde(with = "nanoseconds")]
     pub decision_times: Vec<Duration>,
+    /// Wall time of each replan of the raw path (Meta-FaSTrack's tries at each level added up).
+    #[serde(default, with = "nanoseconds")]
+    pub planning_times: Vec<Duration>,
+    /// Seconds with each planner speed bound in use, `(beta, seconds)` by increasing `beta`.
+    #[serde(default)]
+    pub beta_seconds: Vec<(f64, f64)>,
     /// The sensing range used (m).
     pub sensor_range: f64,
     /// The sTEB radius (m).
@@ -303,6 +309,8 @@ impl Simulator {
             uncertified_steps: 0,
             exposed_steps: 0,
             decision_times: Vec::new(),
+            planning_times: Vec::new(),
+            beta_seconds: Vec::new(),
             sensor_range: self.sensor.range,
             steb_radius: self.steb_radius(),
             control_period,
@@ -341,6 +349,10 @@ impl Simulator {
                 }
             };
             run.decision_times.push(started.elapsed());
+            run.planning_times.extend(decision.planning);
+            if let Some(beta) = decision.beta {
+                add_seconds(&mut run.beta_seconds, beta, control_period);
+            }
             run.replans += usize::from(decision.replanned);
             run.resets += usize::from(decision.reset);
             run.held_steps += usize::from(decision.held);
@@ -412,6 +424,14 @@ fn verification_step(info: &pb::ModelInfo) -> Result<f64, MethodError> {
         .as_array()
         .and_then(|rows| rows.iter().find_map(|row| row["verification"]["step"].as_f64()))
         .ok_or_else(|| MethodError::Setup("the model is not verified: give the control period".into()))
+}
+
+/// Adds `seconds` to `beta`'s entry of `(beta, seconds)` pairs kept by increasing `beta`.
+fn add_seconds(pairs: &mut Vec<(f64, f64)>, beta: f64, seconds: f64) {
+    match pairs.binary_search_by(|(b, _)| b.total_cmp(&beta)) {
+        Ok(i) => pairs[i].1 += seconds,
+        Err(i) => pairs.insert(i, (beta, seconds)),
+    }
 }
 
 /// Durations as whole nanoseconds, for records of runs.

@@ -45,12 +45,23 @@ async fn parametric_fastrack_reaches_every_goal_safely_on_twenty_worlds() {
         assert_eq!(done.out_of_domain, 0, "world {}: controls read outside the trained domain", i + 1);
         assert_eq!(done.uncertified_steps, 0, "world {}: steps past the certificate's horizon", i + 1);
         assert_eq!(done.visits.len(), done.samples.len(), "world {}: a visit recorded per period", i + 1);
+        // The time at each beta adds up the periods the samples recorded at it.
+        for &(beta, seconds) in &done.beta_seconds {
+            let periods = done.samples.iter().filter(|s| s.beta == Some(beta)).count();
+            assert!((seconds - periods as f64 * done.control_period).abs() < 1e-6, "world {}: beta {beta}", i + 1);
+        }
+        assert!(done.planning_times.len() == done.replans && done.replans > 0, "world {}: a time per replan", i + 1);
         runs.push(done);
     }
     let all: Vec<&Run> = runs.iter().collect();
     let summary = summarise("PF", &all);
     println!("{}", table(std::slice::from_ref(&summary)).to_markdown());
     assert_eq!((summary.reached, summary.collided, summary.bound_exceeded), (WORLDS as usize, 0, 0));
+    let shares: f64 = summary.beta_shares.iter().map(|(_, share)| share).sum();
+    assert!((shares - 1.0).abs() < 1e-9, "the shares of time add up to {shares}");
+    let (beta_l, beta_u) = (simulator.speeds()[0].beta, simulator.speeds().last().unwrap().beta);
+    assert!(summary.mean_beta().is_some_and(|b| b > beta_l && b < beta_u), "{:?}", summary.mean_beta());
+    assert!(summary.planning_ms.is_some_and(|(mean, p99)| mean > 0.0 && p99 >= mean), "{:?}", summary.planning_ms);
     // The common branch costs one round trip per control step.
     let steps: usize = runs.iter().map(|r| r.samples.len()).sum();
     assert!(

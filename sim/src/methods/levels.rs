@@ -5,7 +5,7 @@
 //! still until then. The control comes from the backend (`TrackingControl`) at the level's `beta`; checking
 //! a pending switch and reading the control share one call.
 
-use super::{Context, Decision, MethodError};
+use super::{Context, Decision, MethodError, TimedPlanner};
 use fastrack_online::core::Answer;
 use fastrack_online::geometry::{clearance, remember, Obstacle, Point};
 use fastrack_online::raw_path::{advance_along, GridAStar, PlanError, PlanRequest, RawPathPlanner};
@@ -25,7 +25,7 @@ pub struct LevelPlanner {
     path: VecDeque<Point>,
     obstacles: Vec<Obstacle>,
     replan: bool,
-    path_planner: GridAStar,
+    path_planner: TimedPlanner,
 }
 
 impl LevelPlanner {
@@ -42,7 +42,7 @@ impl LevelPlanner {
             path: VecDeque::new(),
             obstacles: Vec::new(),
             replan: true,
-            path_planner: GridAStar::default(),
+            path_planner: TimedPlanner::new(Box::new(GridAStar::default())),
         }
     }
 
@@ -131,6 +131,7 @@ impl LevelPlanner {
             beta: Some(self.levels[self.current].beta),
             bound: Some(self.levels[self.current].bound),
             replanned,
+            planning: self.path_planner.take(),
             reset: false,
             held: false,
             visit: None,

@@ -5,10 +5,12 @@
 mod levels;
 mod mppi;
 mod parametric;
+mod timed_planner;
 
 pub use levels::LevelPlanner;
 pub use mppi::{Mppi, MppiSettings};
 pub use parametric::{Parametric, RESET_CANDIDATES};
+pub use timed_planner::TimedPlanner;
 
 use crate::backend::Backend;
 use crate::trace::LoopTrace;
@@ -18,6 +20,7 @@ use crate::world::World;
 use fastrack_online::geometry::{Obstacle, Point};
 use fastrack_proto::planner_speed::SpeedRow;
 use std::sync::Arc;
+use std::time::Duration;
 
 /// Which method drives the robot.
 #[derive(Debug, Clone, PartialEq)]
@@ -95,6 +98,9 @@ pub struct Decision {
     pub bound: Option<f64>,
     /// The raw path was planned again.
     pub replanned: bool,
+    /// Wall time spent planning raw paths this period (`None`: none planned; Meta-FaSTrack's tries at each
+    /// level add up).
+    pub planning: Option<Duration>,
     /// The planner was reset (Parametric FaSTrack's adjustPlannerControl).
     pub reset: bool,
     /// The planner held its state with the previous, larger bound in force (adjustPlannerControl found no

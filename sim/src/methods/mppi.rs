@@ -110,6 +110,7 @@ impl Mppi {
             beta: None,
             bound: None,
             replanned,
+            planning: None,
             reset: false,
             held: false,
             visit: None,

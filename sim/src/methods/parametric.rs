@@ -2,7 +2,7 @@
 //! by the model in this process), with A* on a grid as its raw-path planner: the shortest path, or the
 //! fastest at the speeds the rule allows along it.
 
-use super::{Context, Decision, MethodError};
+use super::{Context, Decision, MethodError, TimedPlanner};
 use crate::backend::BackendOracle;
 use crate::trace::{LoopTrace, TraceStep, FORMAT};
 use crate::visits::Visit;
@@ -18,7 +18,7 @@ pub const RESET_CANDIDATES: usize = 256;
 /// Parametric FaSTrack, running.
 pub struct Parametric {
     online: OnlineLoop<BackendOracle>,
-    planner: Box<dyn RawPathPlanner>,
+    planner: TimedPlanner,
     /// The run's trace, when the context asks for one.
     trace: Option<LoopTrace>,
 }
@@ -53,6 +53,7 @@ impl Parametric {
         });
         let planner: Box<dyn RawPathPlanner> =
             if fastest { Box::new(FastestPath::default()) } else { Box::new(GridAStar::default()) };
+        let planner = TimedPlanner::new(planner);
         Ok(Self { online: OnlineLoop::new(oracle, settings, start)?, planner, trace })
     }
 
@@ -71,7 +72,7 @@ impl Parametric {
                 }
             }
         }
-        let report = self.online.step(tracker, sensed, self.planner.as_mut()).await?;
+        let report = self.online.step(tracker, sensed, &mut self.planner).await?;
         if let Some(trace) = &mut self.trace {
             trace.steps.push(TraceStep::new(tracker, new, &report));
         }
@@ -81,6 +82,7 @@ impl Parametric {
             beta: Some(report.beta_query),
             bound: Some(report.dteb_radius),
             replanned: report.replanned,
+            planning: self.planner.take(),
             reset: report.branch == Branch::Reset,
             held: report.branch == Branch::Hold,
             round_trips: report.round_trips,

@@ -6,7 +6,8 @@ use fastrack_client::FastrackClient;
 use fastrack_lab::record::write_record;
 use fastrack_lab::shard::Shard;
 use fastrack_sim::bench::{
-    paper_comparison, summarise, summary_json, table, time_ratio, BenchPart, BenchRun, Summary, FIGURE_WORLD, PART_STEM,
+    beta_share_table, paper_comparison, summarise, summary_json, table, time_ratio, BenchPart, BenchRun, Summary,
+    FIGURE_WORLD, PART_STEM,
 };
 use fastrack_sim::episode::Run;
 use fastrack_sim::methods::Method;
@@ -214,6 +215,7 @@ pub(super) fn report(
         .join("\n");
     let ours = table(&summaries);
     let paper = paper_comparison(&summaries);
+    let shares = beta_share_table(&summaries);
     if let Some(name) = &recording.record {
         let shown: Vec<&Run> = runs.iter().filter(|r| r.world == FIGURE_WORLD).map(|r| &r.run).collect();
         let steb = shown.first().map(|r| r.steb_radius).context("the runs hold no run of the figure's world")?;
@@ -235,12 +237,16 @@ pub(super) fn report(
                    "pf_time_ratios": ratios.iter().map(|(l, r)| json!({"against": l, "ratio": r.map(|x| x.0), "worlds": r.map(|x| x.1)})).collect::<Vec<_>>(),
                    "paper_pf_over_f_ratio": 22.47 / 37.31, "wall_s": wall_s, "figure": figure,
                    "time_to_goal_figure": times_figure}),
-            &[("Ours", &ours), ("The paper's Table 1 beside ours", &paper)],
+            &[
+                ("Ours", &ours),
+                ("The paper's Table 1 beside ours", &paper),
+                ("Share of the time at each beta (%)", &shares),
+            ],
         )?;
         eprintln!("record: {}", path.display());
     }
     print(json_mode, json!({"summaries": summaries.iter().map(summary_json).collect::<Vec<_>>()}), || {
-        format!("{}\n{}\n{ratio_text}", ours.to_markdown(), paper.to_markdown())
+        format!("{}\n{}\n{}\n{ratio_text}", ours.to_markdown(), paper.to_markdown(), shares.to_markdown())
     });
     ensure_pf_safe(&methods, runs)
 }
