@@ -335,6 +335,7 @@ impl TickSampler {
             tracker_state: tracker,
             planner_state: planner,
             d_obs: Some(rng.random_range(0.0..=self.d_obs_max)),
+            planner_clearance: None,
         }
     }
 }

@@ -398,9 +398,27 @@ impl FastrackClient {
         model: pb::ModelRef,
         d_obs: Option<f64>,
     ) -> Result<pb::QueryPlannerControlResponse, ClientError> {
+        self.planner_speed(pb::QueryPlannerControlRequest { model: Some(model), d_obs, planner_clearance: None }).await
+    }
+
+    /// The planner rule: the fastest planner speed bound whose TEB is less than `planner_clearance`, the
+    /// planner's distance to the nearest sensed obstacle less the farthest one control period can move it.
+    pub async fn query_planner_rule(
+        &self,
+        model: pb::ModelRef,
+        planner_clearance: f64,
+    ) -> Result<pb::QueryPlannerControlResponse, ClientError> {
+        let planner_clearance = Some(planner_clearance);
+        self.planner_speed(pb::QueryPlannerControlRequest { model: Some(model), d_obs: None, planner_clearance }).await
+    }
+
+    async fn planner_speed(
+        &self,
+        request: pb::QueryPlannerControlRequest,
+    ) -> Result<pb::QueryPlannerControlResponse, ClientError> {
         let call =
             |channel, request| async move { SafetyServiceClient::new(channel).query_planner_control(request).await };
-        self.idempotent(pb::QueryPlannerControlRequest { model: Some(model), d_obs }, call).await
+        self.idempotent(request, call).await
     }
 
     /// The TEB at `beta`, with `boundary_points` boundary points (0 for none).

@@ -13,7 +13,7 @@
 
 use crate::geometry::{clearance, norm, remember, sub, Obstacle, Point};
 use crate::raw_path::{advance_along, PlanError, PlanRequest, RawPathPlanner};
-use fastrack_proto::planner_speed::{query_planner_control, row_for, PlannerSpeed, SpeedRow};
+use fastrack_proto::planner_speed::{planner_rule, query_planner_control, row_for, PlannerSpeed, SpeedRow, SpeedRule};
 use serde::{Deserialize, Serialize};
 use std::collections::VecDeque;
 
@@ -84,6 +84,9 @@ pub struct CoreSettings {
     pub bounds: (Point, Point),
     /// Reset candidates asked about per reset before the planner holds.
     pub reset_candidates: usize,
+    /// The rule that picks `beta_query`: the paper's on the tracker's distance to the nearest sensed obstacle,
+    /// or the planner rule on the planner's own clearance.
+    pub rule: SpeedRule,
 }
 
 impl CoreSettings {
@@ -114,6 +117,8 @@ pub enum Query {
         planner: Point,
         /// `d_obs` (`None`: nothing sensed).
         d_obs: Option<f64>,
+        /// The planner rule's clearance (`None`: the paper's rule on `d_obs`).
+        planner_clearance: Option<f64>,
         /// The planner speed bound to answer under.
         beta: f64,
     },
@@ -258,6 +263,7 @@ pub struct Step {
     tracker: Vec<f64>,
     position: Point,
     d_obs: Option<f64>,
+    planner_clearance: Option<f64>,
     beta_old: f64,
     speed: PlannerSpeed,
     replanned: bool,
@@ -372,7 +378,18 @@ impl LoopCore {
         let position = self.tracker_position(tracker);
         let d_obs = (!self.obstacles.is_empty()).then(|| clearance(&self.obstacles, position));
         let beta_old = self.beta_query;
-        let speed = query_planner_control(&self.view.speeds, d_obs);
+        let planner_clearance = match self.settings.rule {
+            // Less the farthest a period's move takes the planner, so that the move keeps the bound clear.
+            SpeedRule::Planner => (!self.obstacles.is_empty()).then(|| {
+                let reach = std::f64::consts::SQRT_2 * self.beta_u() * self.settings.control_period;
+                (clearance(&self.obstacles, self.planner) - reach).max(0.0)
+            }),
+            SpeedRule::HalfDistance => None,
+        };
+        let speed = match planner_clearance {
+            Some(c) => planner_rule(&self.view.speeds, c),
+            None => query_planner_control(&self.view.speeds, d_obs),
+        };
         // The flag stays set until a path is planned: a step that failed to plan plans again next time.
         self.replan_flag |= newly_sensed;
         let replanned = self.replan_flag;
@@ -384,6 +401,7 @@ impl LoopCore {
                 inflation: speed.steb_radius,
                 bounds: self.settings.bounds,
                 speeds: &self.view.speeds,
+                rule: self.settings.rule,
             })?;
             self.raw_path = path.into_iter().skip(1).collect();
             self.replan_flag = false;
@@ -392,6 +410,7 @@ impl LoopCore {
             tracker: tracker.to_vec(),
             position,
             d_obs,
+            planner_clearance,
             beta_old,
             speed,
             replanned,
@@ -440,7 +459,7 @@ impl LoopCore {
             step.stage = Stage::Advance { p_next, ahead, rising: speed.beta > beta_old };
             p_next
         };
-        step.query = Query::Tick { tracker: tracker.to_vec(), planner: p, d_obs, beta: speed.beta };
+        step.query = Query::Tick { tracker: tracker.to_vec(), planner: p, d_obs, planner_clearance, beta: speed.beta };
         Ok(step)
     }
 
@@ -487,10 +506,15 @@ impl LoopCore {
         clearance(&self.obstacles, p) > bound
     }
 
+    /// The table's fastest `beta`.
+    fn beta_u(&self) -> f64 {
+        self.view.speeds.last().map_or(0.0, |row| row.beta)
+    }
+
     /// The row answering for `beta_old` in the current table (only a table replaced under the loop can end
     /// below it).
     fn row_in_force(&self, beta_old: f64) -> Result<SpeedRow, CoreError> {
-        let beta_u = self.view.speeds.last().map_or(f64::NAN, |row| row.beta);
+        let beta_u = self.beta_u();
         row_for(&self.view.speeds, beta_old).map(|i| self.view.speeds[i]).ok_or(CoreError::NoRow { beta_old, beta_u })
     }
 
@@ -602,6 +626,7 @@ impl Step {
                     tracker: self.tracker.clone(),
                     planner: candidate,
                     d_obs: self.d_obs,
+                    planner_clearance: self.planner_clearance,
                     beta: self.speed.beta,
                 };
                 self.stage = Stage::Reset { candidate };
@@ -660,6 +685,7 @@ mod tests {
             goal: [10.0, 0.0],
             bounds: ([-20.0; 2], [20.0; 2]),
             reset_candidates: 8,
+            rule: SpeedRule::HalfDistance,
         };
         LoopCore::new(view, settings, [0.0, 0.0]).unwrap()
     }
@@ -769,6 +795,26 @@ mod tests {
         assert_eq!((report.branch, report.beta_query, report.round_trips), (Branch::Steady, 0.5, 1));
         assert!(matches!(asked[..], [Query::Batch { beta: 0.5, .. }]), "{asked:?}");
         assert!((report.planner[0] - 0.2).abs() < 1e-12, "{:?}", report.planner);
+    }
+
+    #[test]
+    fn the_planner_rule_reads_the_planners_clearance_less_one_periods_reach() {
+        let mut core = core();
+        core.settings.rule = SpeedRule::Planner;
+        let (first, asked) = run(&mut core, &[0.0; 4], &[], true, true);
+        assert!(matches!(asked[..], [Query::Tick { planner_clearance: None, beta, .. }] if beta == 1.5));
+        assert_eq!(first.branch, Branch::Advance);
+        // The planner 1.35 m from the obstacle's edge, less sqrt(2) 1.5 m/s 0.1 s: 1.138 m, which bound 1.0 fits
+        // and 1.5 does not, though the tracker 4.5 m away would allow 1.5 under the paper's rule.
+        let reach = std::f64::consts::SQRT_2 * 1.5 * 0.1;
+        let (drop, asked) = run(&mut core, &[-3.0, 0.0, 0.0, 0.0], &[OBSTACLE], true, true);
+        let Query::Tick { planner_clearance: Some(c), beta, .. } = asked[0] else { panic!("{asked:?}") };
+        assert!((c - (1.35 - reach)).abs() < 1e-9 && beta == 1.0, "{c} {beta}");
+        assert_eq!((drop.branch, drop.beta_query), (Branch::Keep, 1.0));
+        // Under the row it chose, a period's move keeps the bound clear: the planner advances.
+        let (next, _) = run(&mut core, &[-3.0, 0.0, 0.0, 0.0], &[OBSTACLE], true, true);
+        assert_eq!((next.branch, next.beta_query), (Branch::Advance, 1.0));
+        assert!(clearance(core.obstacles(), next.planner) > 1.0 && next.planner[0] > drop.planner[0]);
     }
 
     #[test]

@@ -14,7 +14,7 @@
 
 use crate::geometry::{clearance, segment_is_free, sub, Obstacle, Point};
 use crate::raw_path::{Cell, CellGrid, PlanError, PlanRequest, RawPathPlanner};
-use fastrack_proto::planner_speed::{query_planner_control, SpeedRow};
+use fastrack_proto::planner_speed::{SpeedRow, SpeedRule};
 use std::cell::RefCell;
 use std::collections::HashMap;
 
@@ -42,7 +42,12 @@ impl RawPathPlanner for FastestPath {
             _ => return Err(PlanError::Settings("the fastest path needs the TEB table's rows, each beta > 0".into())),
         };
         let grid = CellGrid::new(request, self.cell)?;
-        let speed = SpeedMap { obstacles: request.obstacles, speeds: request.speeds, known: RefCell::default() };
+        let speed = SpeedMap {
+            obstacles: request.obstacles,
+            speeds: request.speeds,
+            rule: request.rule,
+            known: RefCell::default(),
+        };
         let seconds = |a: Point, b: Point| chebyshev(a, b) / speed.at(a).min(speed.at(b));
         let goal = grid.cell_of(request.goal);
         let points = grid.search(
@@ -57,15 +62,16 @@ impl RawPathPlanner for FastestPath {
 struct SpeedMap<'a> {
     obstacles: &'a [Obstacle],
     speeds: &'a [SpeedRow],
+    rule: SpeedRule,
     known: RefCell<HashMap<[u64; 2], f64>>,
 }
 
 impl SpeedMap<'_> {
-    /// queryPlannerControl's `beta` with the point's clearance as the distance to the nearest obstacle.
+    /// The rule's `beta` at the point's clearance.
     fn at(&self, p: Point) -> f64 {
         *self.known.borrow_mut().entry(p.map(f64::to_bits)).or_insert_with(|| {
-            let d_obs = (!self.obstacles.is_empty()).then(|| clearance(self.obstacles, p));
-            query_planner_control(self.speeds, d_obs).beta
+            let gap = (!self.obstacles.is_empty()).then(|| clearance(self.obstacles, p));
+            self.rule.at_clearance(self.speeds, gap).beta
         })
     }
 }
@@ -132,12 +138,18 @@ mod tests {
             inflation: 0.3,
             bounds: ([-1.0, -12.0], [21.0, 12.0]),
             speeds,
+            rule: SpeedRule::HalfDistance,
         }
     }
 
     /// Seconds along `path` at the rule's speed, finely sampled.
     fn travel_seconds(path: &[Point], request: &PlanRequest<'_>) -> f64 {
-        let speed = SpeedMap { obstacles: request.obstacles, speeds: request.speeds, known: RefCell::default() };
+        let speed = SpeedMap {
+            obstacles: request.obstacles,
+            speeds: request.speeds,
+            rule: request.rule,
+            known: RefCell::default(),
+        };
         path.windows(2).map(|w| segment_seconds(w[0], w[1], 0.01, &speed)).sum()
     }
 
@@ -166,6 +178,23 @@ mod tests {
         for segment in fastest.windows(2) {
             assert!(segment_is_free(&walls, segment[0], segment[1], 0.3), "{segment:?} cuts the inflation");
         }
+    }
+
+    #[test]
+    fn the_planner_rule_prices_a_corridor_at_the_bounds_that_fit_its_clearance() {
+        // Walls 4.4 m apart: 2.2 m of clearance on the centre line. The paper's rule fits bounds up to 1.1 m
+        // there (beta 1.0), the planner rule bounds below 2.2 m (beta 1.5).
+        let walls = [
+            Obstacle::Rectangle { min: [-2.0, 2.2], max: [22.0, 2.4] },
+            Obstacle::Rectangle { min: [-2.0, -2.4], max: [22.0, -2.2] },
+        ];
+        let speeds = table();
+        let half = request(&walls, &speeds);
+        let planner = PlanRequest { rule: SpeedRule::Planner, ..request(&walls, &speeds) };
+        let straight = [[0.0, 0.0], [20.0, 0.0]];
+        assert!((travel_seconds(&straight, &half) - 20.0).abs() < 1e-6);
+        assert!((travel_seconds(&straight, &planner) - 20.0 / 1.5).abs() < 1e-6);
+        assert_eq!(FastestPath::default().plan(&planner).unwrap(), straight.to_vec());
     }
 
     #[test]

@@ -29,6 +29,7 @@ use crate::oracle::Oracle;
 use crate::raw_path::{PlanError, RawPathPlanner};
 use crate::track_oracle::TrackOracle;
 use fastrack_client::{pb, ClientError, FastrackClient};
+use fastrack_proto::planner_speed::SpeedRule;
 
 pub use crate::core::{Branch, StepReport};
 
@@ -45,6 +46,8 @@ pub struct LoopSettings {
     pub bounds: (Point, Point),
     /// Reset candidates asked about per reset before the planner holds.
     pub reset_candidates: usize,
+    /// The rule that picks `beta_query` (the paper's by default).
+    pub rule: SpeedRule,
 }
 
 /// Why a step could not be taken.
@@ -109,6 +112,7 @@ impl LoopSettings {
             goal: self.goal,
             bounds: self.bounds,
             reset_candidates: self.reset_candidates,
+            rule: self.rule,
         }
     }
 }

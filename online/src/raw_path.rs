@@ -3,7 +3,7 @@
 //! `pathfinding` crate) with the path shortened by line of sight.
 
 use crate::geometry::{clearance, norm, segment_is_free, sub, Obstacle, Point};
-use fastrack_proto::planner_speed::SpeedRow;
+use fastrack_proto::planner_speed::{SpeedRow, SpeedRule};
 use std::collections::VecDeque;
 
 /// What a planner is asked for.
@@ -22,6 +22,8 @@ pub struct PlanRequest<'a> {
     /// The TEB table the speed rule reads (slowest row first), for planners that plan for speed; others
     /// ignore it.
     pub speeds: &'a [SpeedRow],
+    /// The rule that picks the speed along the path, for planners that plan for speed.
+    pub rule: SpeedRule,
 }
 
 /// A path that cannot be planned.
@@ -249,6 +251,7 @@ mod tests {
             inflation,
             bounds: ([-1.0, -6.0], [11.0, 6.0]),
             speeds: &[],
+            rule: SpeedRule::HalfDistance,
         }
     }
 

@@ -93,7 +93,7 @@ impl Oracle for TrackOracle {
     /// A tick on the stream (its `beta_query` checked against the core's), or one `TrackingControl` batch.
     async fn answer(&mut self, query: &Query) -> Result<Vec<Answer>, LoopError> {
         match query {
-            Query::Tick { tracker, planner, d_obs, beta } => {
+            Query::Tick { tracker, planner, d_obs, planner_clearance, beta } => {
                 let seq = self.seq;
                 self.seq += 1;
                 let tick = pb::TrackTick {
@@ -101,6 +101,7 @@ impl Oracle for TrackOracle {
                     tracker_state: tracker.clone(),
                     planner_state: planner.to_vec(),
                     d_obs: *d_obs,
+                    planner_clearance: *planner_clearance,
                 };
                 let reply = self.stream.tick(tick).await?;
                 if let Some(error) = reply.error {

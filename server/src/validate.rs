@@ -1,6 +1,7 @@
 //! Request validation: every rejection names the field, the item and what is allowed.
 
 use crate::loaded_model::LoadedModel;
+use fastrack_proto::planner_speed::{planner_rule, query_planner_control, PlannerSpeed};
 use fastrack_proto::v1::OutOfDomainPolicy;
 use tonic::Status;
 
@@ -135,6 +136,30 @@ pub fn d_obs(d: Option<f64>) -> Result<Option<f64>, Status> {
         ))),
         other => Ok(other),
     }
+}
+
+/// Checks a planner clearance (the planner rule's distance): absent, or finite and `>= 0`.
+pub fn planner_clearance(c: Option<f64>) -> Result<Option<f64>, Status> {
+    match c {
+        Some(x) if !x.is_finite() || x < 0.0 => Err(Status::invalid_argument(format!(
+            "planner_clearance = {x}; must be a finite distance >= 0, or absent for the paper's rule on d_obs"
+        ))),
+        other => Ok(other),
+    }
+}
+
+/// The planner speed for a question's `d_obs` and `planner_clearance`, each checked: the planner rule when
+/// the clearance is given, the paper's queryPlannerControl otherwise.
+pub fn planner_speed(
+    model: &LoadedModel,
+    d_obs: Option<f64>,
+    planner_clearance: Option<f64>,
+) -> Result<PlannerSpeed, Status> {
+    let d_obs = self::d_obs(d_obs)?;
+    Ok(match self::planner_clearance(planner_clearance)? {
+        Some(c) => planner_rule(&model.speeds, c),
+        None => query_planner_control(&model.speeds, d_obs),
+    })
 }
 
 /// Checks a table `beta` against the model's range `[beta_l, beta_u]`.

@@ -84,12 +84,13 @@ impl Oracle for LocalOracle {
 
     async fn answer(&mut self, query: &Query) -> Result<Vec<Answer>, LoopError> {
         match query {
-            Query::Tick { tracker, planner, d_obs, beta } => {
+            Query::Tick { tracker, planner, d_obs, planner_clearance, beta } => {
                 let tick = pb::TrackTick {
                     seq: 0,
                     tracker_state: tracker.clone(),
                     planner_state: planner.to_vec(),
                     d_obs: *d_obs,
+                    planner_clearance: *planner_clearance,
                 };
                 let model = &self.local.model;
                 let (question, batch) = TickQuestion::new(model, &tick).map_err(refused)?;

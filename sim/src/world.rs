@@ -3,6 +3,7 @@
 
 use fastrack_online::geometry::{clearance, norm, sub, Obstacle, Point};
 use fastrack_online::raw_path::{GridAStar, PlanRequest, RawPathPlanner};
+use fastrack_proto::planner_speed::SpeedRule;
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use serde::{Deserialize, Serialize};
@@ -192,6 +193,7 @@ impl World {
             inflation,
             bounds: self.bounds(),
             speeds: &[],
+            rule: SpeedRule::HalfDistance,
         };
         GridAStar::default().plan(&request).map(|_| ()).map_err(|_| WorldError::Infeasible {
             start: self.start,
@@ -382,6 +384,7 @@ impl WorldSpec {
             inflation: self.inflation,
             bounds: world.bounds(),
             speeds: &[],
+            rule: SpeedRule::HalfDistance,
         };
         let path = GridAStar::default().plan(&request).ok()?;
         let along = arc_lengths(&path);
@@ -570,6 +573,7 @@ radius = 1.0
                             inflation,
                             bounds: world.bounds(),
                             speeds: &[],
+                            rule: SpeedRule::HalfDistance,
                         };
                         let path = GridAStar::default().plan(&request).unwrap();
                         for popup in popups {

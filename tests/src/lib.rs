@@ -123,6 +123,7 @@ pub fn robot_tick(seq: u64, robot: u64) -> fastrack_client::pb::TrackTick {
         tracker_state: vec![0.3 * phase.sin(), 0.2 * phase.cos(), phase % 3.0, 1.0 + 0.5 * phase.sin()],
         planner_state: vec![0.0, 0.0],
         d_obs: Some(1.0 + (seq % 7) as f64),
+        planner_clearance: None,
     }
 }
 

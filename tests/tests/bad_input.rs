@@ -147,6 +147,13 @@ async fn bad_requests_get_their_status_and_a_precise_message() {
         &["d_obs = -1", ">= 0"],
     );
     expect_error(client.query_planner_control(good(), Some(f64::NAN)).await, Code::InvalidArgument, &["d_obs = NaN"]);
+    for bad in [-0.5, f64::INFINITY] {
+        expect_error(
+            client.query_planner_rule(good(), bad).await,
+            Code::InvalidArgument,
+            &["planner_clearance = ", "finite distance >= 0"],
+        );
+    }
 
     // Outside the domain: one item is rejected, a batch is flagged, REJECT names the item.
     expect_error(
@@ -202,8 +209,13 @@ async fn bad_requests_get_their_status_and_a_precise_message() {
         );
     }
     let mut stream = client.track(good(), 5.0).await.unwrap();
-    let tick =
-        pb::TrackTick { seq: 1, tracker_state: vec![1e300, 0.0, 0.0, 1.0], planner_state: vec![0.0, 0.0], d_obs: None };
+    let tick = pb::TrackTick {
+        seq: 1,
+        tracker_state: vec![1e300, 0.0, 0.0, 1.0],
+        planner_state: vec![0.0, 0.0],
+        d_obs: None,
+        planner_clearance: None,
+    };
     let reply = stream.tick(tick).await.unwrap();
     let error = reply.error.expect("the far tick is refused");
     assert_eq!(Code::from_i32(error.code), Code::OutOfRange, "{}", error.message);

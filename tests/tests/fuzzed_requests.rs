@@ -39,6 +39,11 @@ fn numbers(max_len: usize) -> impl Strategy<Value = Vec<f64>> {
     prop::collection::vec(number(), 0..=max_len)
 }
 
+/// An optional distance: mostly a plausible one, sometimes any number.
+fn distance() -> impl Strategy<Value = Option<f64>> {
+    prop::option::of(prop_oneof![0.0..8.0f64, number()])
+}
+
 /// The served model most of the time, otherwise names and versions that are not served.
 fn model() -> impl Strategy<Value = Option<pb::ModelRef>> {
     prop_oneof![
@@ -154,14 +159,16 @@ fn every_rpc_answers_random_requests_with_a_reply_or_a_precise_status() {
         .unwrap();
 
     runner()
-        .run(&(model(), prop::option::of(prop_oneof![0.0..8.0f64, number()])), |(model, d_obs)| {
-            let request = pb::QueryPlannerControlRequest { model, d_obs };
+        .run(&(model(), distance(), distance()), |(model, d_obs, planner_clearance)| {
+            let request = pb::QueryPlannerControlRequest { model, d_obs, planner_clearance };
             let answer = runtime.block_on(service.clone().query_planner_control(request));
             count("QueryPlannerControl", answer.is_ok());
             match answer {
                 Ok(reply) => {
                     let r = reply.into_inner();
-                    prop_assert!(d_obs.is_none_or(|d| d.is_finite() && d >= 0.0), "answered d_obs {d_obs:?}");
+                    let valid = |x: Option<f64>| x.is_none_or(|d| d.is_finite() && d >= 0.0);
+                    prop_assert!(valid(d_obs), "answered d_obs {d_obs:?}");
+                    prop_assert!(valid(planner_clearance), "answered planner_clearance {planner_clearance:?}");
                     prop_assert!((0.5..=1.25).contains(&r.beta_query), "beta_query {}", r.beta_query);
                     prop_assert!(r.dteb_radius > 0.0 && r.steb_radius > 0.0);
                 }
@@ -198,7 +205,7 @@ fn every_rpc_answers_random_requests_with_a_reply_or_a_precise_status() {
         .run(&tick(), |(tracker_state, planner_state, d_obs)| {
             let seq = last_seq.get() + 1;
             last_seq.set(seq);
-            let tick = pb::TrackTick { seq, tracker_state, planner_state, d_obs };
+            let tick = pb::TrackTick { seq, tracker_state, planner_state, d_obs, planner_clearance: None };
             let reply = runtime
                 .block_on(stream.borrow_mut().tick(tick))
                 .map_err(|e| TestCaseError::fail(format!("the stream failed: {e}")))?;

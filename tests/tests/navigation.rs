@@ -180,7 +180,7 @@ async fn worlds_generated_for_a_larger_steb_keep_it_clear() {
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn every_world_family_is_driven_safely_by_parametric_fastrack_on_both_paths_and_fastrack() {
+async fn every_world_family_is_driven_safely_by_parametric_fastrack_on_both_paths_and_rules_and_fastrack() {
     let (_server, simulator) = shipped().await;
     let steb = simulator.steb_radius();
     let mut lines = Vec::new();
@@ -188,9 +188,13 @@ async fn every_world_family_is_driven_safely_by_parametric_fastrack_on_both_path
     for family in WorldFamily::ALL {
         for seed in 1..=2 {
             let world = WorldSpec { seed, family, inflation: steb, ..WorldSpec::default() }.generate().unwrap();
-            for method in
-                [Method::Parametric, Method::ParametricFastestPath, Method::FastrackSlowest, Method::FastrackFastest]
-            {
+            for method in [
+                Method::Parametric,
+                Method::ParametricFastestPath,
+                Method::ParametricPlannerRule,
+                Method::FastrackSlowest,
+                Method::FastrackFastest,
+            ] {
                 let run = simulator.spawn_run(world.clone(), method.clone(), seed).await.unwrap().unwrap();
                 let line = format!(
                     "{} on {family} world {seed}: {} after {:.1} s, min clearance {:.3} m, {} steps the bound reached an obstacle",
@@ -214,6 +218,6 @@ async fn every_world_family_is_driven_safely_by_parametric_fastrack_on_both_path
     }
     println!("{}", lines.join("\n"));
     // No collision and no error over the bound in force, on any family, no bound in force ever reaching an
-    // obstacle, and PF reaching every goal on both raw paths.
+    // obstacle, and PF reaching every goal on both raw paths and under both rules.
     assert!(unsafe_runs.is_empty(), "{}", unsafe_runs.join("\n"));
 }

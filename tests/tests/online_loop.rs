@@ -9,6 +9,7 @@ use fastrack_e2e::TestServer;
 use fastrack_online::geometry::{clearance, Obstacle};
 use fastrack_online::online_loop::{Branch, LoopError, LoopSettings, OnlineLoop};
 use fastrack_online::raw_path::GridAStar;
+use fastrack_proto::planner_speed::SpeedRule;
 use std::f64::consts::FRAC_PI_2;
 use std::path::Path;
 
@@ -22,6 +23,7 @@ fn settings() -> LoopSettings {
         goal: [10.0, 0.0],
         bounds: ([-2.0, -6.0], [12.0, 6.0]),
         reset_candidates: 64,
+        rule: SpeedRule::HalfDistance,
     }
 }
 

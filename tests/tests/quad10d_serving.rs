@@ -82,7 +82,13 @@ async fn one_server_serves_dubins4d_and_quad10d_and_refuses_bad_quad_input() {
     let mut stream = client.track(quad(), 0.0).await.unwrap();
     let tracker = vec![1.0, 0.5, 0.1, 0.2, -1.0, 0.0, 0.0, 0.0, 2.0, -0.5];
     let reply = stream
-        .tick(pb::TrackTick { seq: 1, tracker_state: tracker, planner_state: vec![0.25, -1.5, 1.0], d_obs: Some(5.0) })
+        .tick(pb::TrackTick {
+            seq: 1,
+            tracker_state: tracker,
+            planner_state: vec![0.25, -1.5, 1.0],
+            d_obs: Some(5.0),
+            planner_clearance: None,
+        })
         .await
         .unwrap();
     assert_eq!(reply.relative_state, vec![0.75, 0.5, 0.1, 0.2, 0.5, 0.0, 0.0, 0.0, 1.0, -0.5]);

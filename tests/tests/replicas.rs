@@ -8,6 +8,7 @@ use fastrack_e2e::{robot_tick, TestServer};
 use fastrack_online::geometry::Obstacle;
 use fastrack_online::online_loop::{LoopSettings, OnlineLoop};
 use fastrack_online::raw_path::GridAStar;
+use fastrack_proto::planner_speed::SpeedRule;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -204,6 +205,7 @@ async fn an_online_loop_keeps_its_bound_in_force_across_a_failover() {
         goal: [10.0, 0.0],
         bounds: ([-2.0, -6.0], [12.0, 6.0]),
         reset_candidates: 64,
+        rule: SpeedRule::HalfDistance,
     };
     let mut online = OnlineLoop::start(&client, settings, [0.0, 0.0]).await.unwrap();
     let mut planner = GridAStar::default();

@@ -164,6 +164,7 @@ async fn track_stream_answers_every_tick_in_order_from_the_tick_alone() {
                 tracker_state: tracker.clone(),
                 planner_state: planner.clone(),
                 d_obs: *d_obs,
+                planner_clearance: None,
             })
             .await
             .unwrap();
@@ -190,6 +191,7 @@ async fn track_stream_answers_every_tick_in_order_from_the_tick_alone() {
             tracker_state: vec![0.3 + 0.1 * seq as f64, -0.2, 7.0, 1.1],
             planner_state: vec![0.1, 0.4],
             d_obs: *d_obs,
+            planner_clearance: None,
         };
         let again = stream.tick(tick).await.unwrap();
         assert_eq!(pb::TrackReply { seq: seq as u64, ..again }, replies[seq], "tick {seq} answered again");
@@ -197,7 +199,13 @@ async fn track_stream_answers_every_tick_in_order_from_the_tick_alone() {
 
     // A bad tick gets an error reply and the stream stays open.
     let bad = stream
-        .tick(pb::TrackTick { seq: 99, tracker_state: vec![0.0; 3], planner_state: vec![0.0; 2], d_obs: None })
+        .tick(pb::TrackTick {
+            seq: 99,
+            tracker_state: vec![0.0; 3],
+            planner_state: vec![0.0; 2],
+            d_obs: None,
+            planner_clearance: None,
+        })
         .await
         .unwrap();
     let error = bad.error.expect("error reply");
@@ -209,6 +217,7 @@ async fn track_stream_answers_every_tick_in_order_from_the_tick_alone() {
             tracker_state: vec![0.0, f64::NAN, 0.0, 1.0],
             planner_state: vec![0.0; 2],
             d_obs: None,
+            planner_clearance: None,
         })
         .await
         .unwrap();
@@ -219,6 +228,7 @@ async fn track_stream_answers_every_tick_in_order_from_the_tick_alone() {
             tracker_state: vec![0.0, 0.0, 0.0, 1.0],
             planner_state: vec![0.0; 2],
             d_obs: Some(-1.0),
+            planner_clearance: None,
         })
         .await
         .unwrap();
@@ -229,6 +239,7 @@ async fn track_stream_answers_every_tick_in_order_from_the_tick_alone() {
             tracker_state: vec![0.0, 0.0, 0.0, 1.0],
             planner_state: vec![0.0; 2],
             d_obs: None,
+            planner_clearance: None,
         })
         .await
         .unwrap();
@@ -242,6 +253,7 @@ async fn track_stream_answers_every_tick_in_order_from_the_tick_alone() {
                 tracker_state: vec![0.0, 0.0, 0.0, 1.0],
                 planner_state: vec![0.0; 2],
                 d_obs: Some(1.0 + seq as f64 * 0.01),
+                planner_clearance: None,
             })
             .await
             .unwrap();

@@ -3,10 +3,19 @@
 
 use fastrack_client::{model_ref, pb};
 use fastrack_e2e::{binary, write_test_bundle, TestServer};
-use fastrack_proto::planner_speed::{query_planner_control, SpeedRow};
+use fastrack_proto::planner_speed::{planner_rule, query_planner_control, SpeedRow};
 use fastrack_valuefn::system::dubins4d;
 
-use fastrack_e2e::robot_tick as tick;
+use fastrack_e2e::robot_tick;
+
+/// Robot 0's tick `seq`; every third asks for the planner rule, with a clearance of a third of its `d_obs`.
+fn tick(seq: u64, robot: u64) -> pb::TrackTick {
+    let mut tick = robot_tick(seq, robot);
+    if seq.is_multiple_of(3) {
+        tick.planner_clearance = Some(tick.d_obs.unwrap_or(3.0) / 3.0);
+    }
+    tick
+}
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn ten_thousand_ticks_are_answered_in_order() {
@@ -34,8 +43,12 @@ async fn ten_thousand_ticks_are_answered_in_order() {
         assert_eq!(reply.seq, expected, "replies out of order");
         assert!(reply.error.is_none(), "tick {expected}: {:?}", reply.error);
         assert!(reply.value.is_finite() && reply.control.iter().all(|u| u.is_finite()));
-        let chosen = query_planner_control(&speeds, tick(expected, 0).d_obs);
-        assert_eq!(reply.beta_query, chosen.beta, "tick {expected}: beta_query must be its own d_obs' row");
+        let sent = tick(expected, 0);
+        let chosen = match sent.planner_clearance {
+            Some(c) => planner_rule(&speeds, c),
+            None => query_planner_control(&speeds, sent.d_obs),
+        };
+        assert_eq!(reply.beta_query, chosen.beta, "tick {expected}: beta_query must be its own rule's row");
     }
     sender.await.unwrap();
     let answered = server.metric(r#"fastrack_track_ticks_total{rpc="Track",model="dubins-test",code="OK"}"#).await;

@@ -1,4 +1,4 @@
-//! `fastrack query`: the paper's queryPlannerControl.
+//! `fastrack query`: the paper's queryPlannerControl, or the planner rule.
 
 use super::print;
 use fastrack_client::{model_ref, FastrackClient};
@@ -10,8 +10,12 @@ pub struct Args {
     /// Model name.
     name: String,
     /// Distance to the nearest sensed obstacle (omit when none is sensed).
-    #[arg(long)]
+    #[arg(long, conflicts_with = "planner_clearance")]
     d_obs: Option<f64>,
+    /// The planner rule instead: the planner's distance to the nearest sensed obstacle, less the farthest one
+    /// control period can move it.
+    #[arg(long)]
+    planner_clearance: Option<f64>,
     /// Version (0 = the default: the pinned version, else the latest).
     #[arg(long, default_value_t = 0)]
     version: u32,
@@ -19,7 +23,11 @@ pub struct Args {
 
 /// Prints the fastest planner speed bound for the obstacle distance, with the dTEB and sTEB radii.
 pub async fn run(client: &FastrackClient, args: Args, json_mode: bool) -> anyhow::Result<()> {
-    let r = client.query_planner_control(model_ref(&args.name, args.version), args.d_obs).await?;
+    let model = model_ref(&args.name, args.version);
+    let r = match args.planner_clearance {
+        Some(c) => client.query_planner_rule(model, c).await?,
+        None => client.query_planner_control(model, args.d_obs).await?,
+    };
     print(
         json_mode,
         json!({"beta_query": r.beta_query, "dteb_radius": r.dteb_radius, "steb_radius": r.steb_radius,
@@ -30,7 +38,7 @@ pub async fn run(client: &FastrackClient, args: Args, json_mode: bool) -> anyhow
                 r.beta_query,
                 r.dteb_radius,
                 r.steb_radius,
-                if r.steb_exceeds_half_distance { "  (sTEB exceeds d_obs/2: slowest speed)" } else { "" }
+                if r.steb_exceeds_half_distance { "  (the sTEB does not fit: slowest speed)" } else { "" }
             )
         },
     );

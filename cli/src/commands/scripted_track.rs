@@ -43,6 +43,7 @@ pub async fn run(client: &FastrackClient, args: Args, json_mode: bool) -> anyhow
                 tracker_state: tracker.clone(),
                 planner_state: planner.clone(),
                 d_obs: Some(d_obs),
+                planner_clearance: None,
             })
             .await?;
         if let Some(error) = &reply.error {

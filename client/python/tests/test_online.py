@@ -46,7 +46,9 @@ from fastrack.online import (
     TableMismatch,
     TrackerStateError,
     advance_along,
+    SpeedRule,
     path_length,
+    planner_rule,
     query_planner_control,
     row_for,
 )
@@ -66,6 +68,7 @@ def online(
     control_period: float = 0.1,
     planner: RawPathPlanner | None = None,
     reset_candidates: int = 64,
+    rule: SpeedRule = "half-distance",
 ) -> OnlineLoop:
     """The Rust tests' settings: start (0, 0), goal (10, 0), workspace [-2, 12] x [-6, 6], dt 0.1 s, 64 reset
     candidates; A* raw paths."""
@@ -78,6 +81,7 @@ def online(
         control_period=control_period,
         planner=planner,
         reset_candidates=reset_candidates,
+        rule=rule,
     )
 
 
@@ -263,6 +267,30 @@ def test_a_move_that_would_bring_the_planner_within_the_bound_of_an_obstacle_hol
         assert step.branch == "hold" and step.round_trips == 1, step
         np.testing.assert_allclose(step.planner, first.planner, rtol=0, atol=0)
         assert clearance([obstacle], (float(step.planner[0]), float(step.planner[1]))) > 0.0
+
+
+def test_the_planner_rule_picks_beta_by_the_planners_own_clearance(client: fastrack.Client) -> None:
+    with online(client, rule="planner") as loop:
+        first = loop.step([0.0, 0.0, ALONG_X, 1.0])
+        assert first.branch == "advance" and first.beta_query == loop.speeds[-1].beta
+        # An obstacle 0.3 m inside beta_u's bound of the planner, the tracker so far behind that the paper's rule
+        # on its distance would keep beta_u: the planner rule reads the planner's clearance less one period's
+        # reach at beta_u, and drops to the row whose bound fits it.
+        bound = first.dteb_radius
+        edge = first.planner[0] + bound - 0.3
+        obstacle = Circle((edge + 0.5, 0.0), 0.5)
+        tracker = [edge - 2.0 * bound - 0.5, 0.0, ALONG_X, 1.0]
+        reach = math.sqrt(2.0) * loop.speeds[-1].beta * 0.1
+        planner_clearance = clearance([obstacle], (float(first.planner[0]), float(first.planner[1]))) - reach
+        expected = planner_rule(loop.speeds, planner_clearance)
+        assert query_planner_control(loop.speeds, 2.0 * bound + 0.5).beta == first.beta_query
+        step = loop.step(tracker, [obstacle])
+        assert step.beta_query == expected.beta < step.beta_old, step
+        asked = client.query_planner_control(MODEL, planner_clearance=planner_clearance)
+        assert asked.beta_query == expected.beta and asked.dteb_radius == expected.dteb_radius
+        assert clearance([obstacle], (float(step.planner[0]), float(step.planner[1]))) > step.dteb_radius
+    with pytest.raises(LoopSetupError, match="rule = 'fastest'"):
+        online(client, rule="fastest")  # type: ignore[arg-type]
 
 
 def test_a_drop_in_beta_far_from_the_plan_resets_the_planner_inside_the_bound(client: fastrack.Client) -> None:

@@ -7,7 +7,6 @@ use crate::metrics::Metrics;
 use crate::repository::Repository;
 use crate::scheduler::Scheduler;
 use crate::validate::{self, ValidBatch, MAX_BOUNDARY_POINTS};
-use fastrack_proto::planner_speed::query_planner_control;
 use fastrack_proto::v1 as pb;
 use fastrack_valuefn::manifest::{boundary_directions, TebRow};
 use pb::safety_service_server::SafetyService;
@@ -139,8 +138,7 @@ impl SafetyService for Safety {
         let req = request.into_inner();
         let answer = (|| {
             let model = self.repository.resolve(req.model.as_ref())?;
-            let d_obs = validate::d_obs(req.d_obs)?;
-            let q = query_planner_control(&model.speeds, d_obs);
+            let q = validate::planner_speed(&model, req.d_obs, req.planner_clearance)?;
             Ok(Response::new(pb::QueryPlannerControlResponse {
                 beta_query: q.beta,
                 dteb_radius: q.dteb_radius,

@@ -12,7 +12,7 @@ use crate::metrics::{code_name, Metrics};
 use crate::repository::Repository;
 use crate::scheduler::Scheduler;
 use crate::validate::{self, ValidBatch};
-use fastrack_proto::planner_speed::{query_planner_control, PlannerSpeed};
+use fastrack_proto::planner_speed::PlannerSpeed;
 use fastrack_proto::v1 as pb;
 use pb::track_request::Msg;
 use std::sync::Arc;
@@ -214,22 +214,22 @@ async fn evaluate_tick(
     Ok(question.reply(result, &batch))
 }
 
-/// A validated tick: the planner speed queryPlannerControl gives for its `d_obs` and its relative state.
+/// A validated tick: the planner speed its rule gives (the planner rule on `planner_clearance`, else the
+/// paper's on `d_obs`) and its relative state.
 pub struct TickQuestion {
     seq: u64,
-    /// queryPlannerControl's answer for the tick's `d_obs`.
+    /// The rule's answer for the tick.
     pub speed: PlannerSpeed,
     relative: Vec<f64>,
 }
 
 impl TickQuestion {
-    /// Checks the tick's vectors and `d_obs` and forms its relative state, with the batch of one to evaluate
+    /// Checks the tick's vectors, `d_obs` and `planner_clearance` and forms its relative state, with the batch of one to evaluate
     /// (`r = s - Q p` under `beta_query`, `in_domain` flagged) on the compute pool or, in the caller's
     /// process, with [`LoadedModel::answer`].
     pub fn new(model: &LoadedModel, tick: &pb::TrackTick) -> Result<(Self, ValidBatch), Status> {
         validate::tick(model, &tick.tracker_state, &tick.planner_state)?;
-        let d_obs = validate::d_obs(tick.d_obs)?;
-        let speed = query_planner_control(&model.speeds, d_obs);
+        let speed = validate::planner_speed(model, tick.d_obs, tick.planner_clearance)?;
         let relative = model.space.relative_state(&tick.tracker_state, &tick.planner_state);
         let params = vec![speed.beta; model.manifest.n_params()];
         let batch = validate::batch(model, &relative, &params, pb::OutOfDomainPolicy::Flag)?;

@@ -9,7 +9,7 @@ use super::{Context, Decision, MethodError, TimedPlanner};
 use fastrack_online::core::Answer;
 use fastrack_online::geometry::{clearance, remember, Obstacle, Point};
 use fastrack_online::raw_path::{advance_along, GridAStar, PlanError, PlanRequest, RawPathPlanner};
-use fastrack_proto::planner_speed::SpeedRow;
+use fastrack_proto::planner_speed::{SpeedRow, SpeedRule};
 use std::collections::VecDeque;
 
 /// FaSTrack over fixed levels, running.
@@ -67,6 +67,7 @@ impl LevelPlanner {
             inflation,
             bounds: self.context.world.bounds(),
             speeds: &[],
+            rule: SpeedRule::HalfDistance,
         };
         Ok(self.path_planner.plan(&request)?.into_iter().skip(1).collect())
     }

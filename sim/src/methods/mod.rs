@@ -18,7 +18,7 @@ use crate::tracker::Tracker;
 use crate::visits::Visit;
 use crate::world::World;
 use fastrack_online::geometry::{Obstacle, Point};
-use fastrack_proto::planner_speed::SpeedRow;
+use fastrack_proto::planner_speed::{SpeedRow, SpeedRule};
 use std::sync::Arc;
 use std::time::Duration;
 
@@ -29,6 +29,9 @@ pub enum Method {
     Parametric,
     /// Parametric FaSTrack on the fastest raw path at the speeds the rule allows along it, `PF-fast`.
     ParametricFastestPath,
+    /// Parametric FaSTrack under the planner rule (`beta` by the planner's own clearance, not half the
+    /// tracker's distance) on the fastest raw path for that rule, `PF-planner`.
+    ParametricPlannerRule,
     /// FaSTrack at the slowest table `beta` (obstacles inflated by its bound), `F(beta_l)`.
     FastrackSlowest,
     /// FaSTrack at the fastest table `beta`, `F(beta_u)`.
@@ -56,7 +59,7 @@ impl Method {
 
     /// Parametric FaSTrack, on either raw path: the methods that must never be unsafe.
     pub fn is_parametric(&self) -> bool {
-        matches!(self, Method::Parametric | Method::ParametricFastestPath)
+        matches!(self, Method::Parametric | Method::ParametricFastestPath | Method::ParametricPlannerRule)
     }
 
     /// Short name, as in the paper's Table 1.
@@ -64,6 +67,7 @@ impl Method {
         match self {
             Method::Parametric => "PF",
             Method::ParametricFastestPath => "PF-fast",
+            Method::ParametricPlannerRule => "PF-planner",
             Method::FastrackSlowest => "F(beta_l)",
             Method::FastrackFastest => "F(beta_u)",
             Method::MetaFastrack { .. } => "MF",
@@ -76,11 +80,14 @@ impl Method {
         match name {
             "pf" => Ok(Method::Parametric),
             "pf-fast" => Ok(Method::ParametricFastestPath),
+            "pf-planner" => Ok(Method::ParametricPlannerRule),
             "f-low" => Ok(Method::FastrackSlowest),
             "f-high" => Ok(Method::FastrackFastest),
             "mf" => Ok(Method::MetaFastrack { levels: 3 }),
             "mppi" => Ok(Method::Mppi(MppiSettings::default())),
-            other => Err(format!("unknown method `{other}`; expected pf, pf-fast, f-low, f-high, mf or mppi")),
+            other => {
+                Err(format!("unknown method `{other}`; expected pf, pf-fast, pf-planner, f-low, f-high, mf or mppi"))
+            }
         }
     }
 }
@@ -175,9 +182,14 @@ impl Controller {
         let start = context.tracker.position(tracker);
         let last = context.speeds.len() - 1;
         Ok(match method {
-            Method::Parametric => Controller::Parametric(Box::new(Parametric::start(context, start, false).await?)),
-            Method::ParametricFastestPath => {
-                Controller::Parametric(Box::new(Parametric::start(context, start, true).await?))
+            Method::Parametric => Controller::Parametric(Box::new(
+                Parametric::start(context, start, false, SpeedRule::HalfDistance).await?,
+            )),
+            Method::ParametricFastestPath => Controller::Parametric(Box::new(
+                Parametric::start(context, start, true, SpeedRule::HalfDistance).await?,
+            )),
+            Method::ParametricPlannerRule => {
+                Controller::Parametric(Box::new(Parametric::start(context, start, true, SpeedRule::Planner).await?))
             }
             Method::FastrackSlowest => Controller::Levels(Box::new(LevelPlanner::new(context, vec![0], start))),
             Method::FastrackFastest => Controller::Levels(Box::new(LevelPlanner::new(context, vec![last], start))),

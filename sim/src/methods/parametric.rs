@@ -11,6 +11,7 @@ use fastrack_online::fastest_path::FastestPath;
 use fastrack_online::geometry::{Obstacle, Point};
 use fastrack_online::online_loop::{Branch, OnlineLoop};
 use fastrack_online::raw_path::{GridAStar, RawPathPlanner};
+use fastrack_proto::planner_speed::SpeedRule;
 
 /// Reset candidates a reset asks about before the planner holds.
 pub const RESET_CANDIDATES: usize = 256;
@@ -25,11 +26,13 @@ pub struct Parametric {
 
 impl Parametric {
     /// Opens the loop's oracle (over the service: its `Track` stream) with the planner at `start`, planning
-    /// the fastest raw path when `fastest` (else the shortest).
-    pub async fn start(context: Context, start: Point, fastest: bool) -> Result<Self, MethodError> {
-        if fastest && context.trace {
+    /// the fastest raw path when `fastest` (else the shortest), `beta` picked by `rule`.
+    pub async fn start(context: Context, start: Point, fastest: bool, rule: SpeedRule) -> Result<Self, MethodError> {
+        if (fastest || rule != SpeedRule::HalfDistance) && context.trace {
             return Err(MethodError::Setup(
-                "a loop trace is recorded with the shortest-path planner (the Python port replays it)".into(),
+                "a loop trace is recorded with the shortest-path planner and the paper's rule (the Python port \
+                 replays it)"
+                    .into(),
             ));
         }
         let settings = CoreSettings {
@@ -37,6 +40,7 @@ impl Parametric {
             goal: context.world.goal,
             bounds: context.world.bounds(),
             reset_candidates: RESET_CANDIDATES,
+            rule,
         };
         settings.check().map_err(|e| MethodError::Setup(e.to_string()))?;
         let oracle = context.backend.oracle().await?;

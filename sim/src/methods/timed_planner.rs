@@ -35,6 +35,7 @@ impl RawPathPlanner for TimedPlanner {
 mod tests {
     use super::*;
     use fastrack_online::raw_path::GridAStar;
+    use fastrack_proto::planner_speed::SpeedRule;
 
     #[test]
     fn plans_add_up_until_taken() {
@@ -47,6 +48,7 @@ mod tests {
             inflation: 0.5,
             bounds: ([-1.0, -1.0], [6.0, 1.0]),
             speeds: &[],
+            rule: SpeedRule::HalfDistance,
         };
         planner.plan(&request).unwrap();
         let one = planner.take().expect("one plan timed");

@@ -165,12 +165,17 @@ class AsyncClient:
         return found
 
     async def query_planner_control(
-        self, model: str, d_obs: convert.Real | None = None, *, version: int = 0, timeout: float | None = None
+        self,
+        model: str,
+        d_obs: convert.Real | None = None,
+        *,
+        planner_clearance: convert.Real | None = None,
+        version: int = 0,
+        timeout: float | None = None,
     ) -> results.PlannerControl:
-        """queryPlannerControl for an obstacle at ``d_obs`` metres (None: none sensed)."""
-        request = safety_pb2.QueryPlannerControlRequest(model=convert.model_ref(model, version))
-        if d_obs is not None:
-            request.d_obs = float(d_obs)
+        """queryPlannerControl for an obstacle at ``d_obs`` metres (None: none sensed), or the planner rule
+        on ``planner_clearance`` (see :meth:`fastrack.Client.query_planner_control`)."""
+        request = convert.planner_speed_request(model, version, d_obs, planner_clearance)
         return convert.planner_control(await self._unary(lambda r: r.safety.QueryPlannerControl, request, timeout))
 
     async def tracking_error_bound(

@@ -167,16 +167,22 @@ class Client:
         return found
 
     def query_planner_control(
-        self, model: str, d_obs: convert.Real | None = None, *, version: int = 0, timeout: float | None = None
+        self,
+        model: str,
+        d_obs: convert.Real | None = None,
+        *,
+        planner_clearance: convert.Real | None = None,
+        version: int = 0,
+        timeout: float | None = None,
     ) -> results.PlannerControl:
         """queryPlannerControl: the fastest planner speed bound whose TEB fits ``d_obs / 2``.
 
         ``d_obs`` is the distance from the tracker to the nearest sensed obstacle, metres (None: none sensed,
-        the fastest beta is returned).
+        the fastest beta is returned). With ``planner_clearance`` (the planner's distance to the nearest sensed
+        obstacle less the farthest one control period can move it, metres) the planner rule answers instead:
+        the fastest planner speed bound whose TEB is less than it.
         """
-        request = safety_pb2.QueryPlannerControlRequest(model=convert.model_ref(model, version))
-        if d_obs is not None:
-            request.d_obs = float(d_obs)
+        request = convert.planner_speed_request(model, version, d_obs, planner_clearance)
         return convert.planner_control(self._unary(lambda r: r.safety.QueryPlannerControl, request, timeout))
 
     def tracking_error_bound(

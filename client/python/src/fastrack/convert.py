@@ -151,7 +151,12 @@ def _vector(field: str, value: npt.ArrayLike, size: int, what: str, dims: Dims) 
 
 
 def tick(
-    dims: Dims, seq: int, tracker_state: npt.ArrayLike, planner_state: npt.ArrayLike, d_obs: Real | None
+    dims: Dims,
+    seq: int,
+    tracker_state: npt.ArrayLike,
+    planner_state: npt.ArrayLike,
+    d_obs: Real | None,
+    planner_clearance: Real | None = None,
 ) -> safety_pb2.TrackRequest:
     """A ``Track`` tick, its vectors checked against the model (tracker [n_state], planner [planner_dim])."""
     tracker = _vector("tracker_state", tracker_state, len(dims.state), ", ".join(dims.state), dims)
@@ -159,7 +164,22 @@ def tick(
     message = safety_pb2.TrackTick(seq=seq, tracker_state=tracker, planner_state=planner)
     if d_obs is not None:
         message.d_obs = float(d_obs)
+    if planner_clearance is not None:
+        message.planner_clearance = float(planner_clearance)
     return safety_pb2.TrackRequest(tick=message)
+
+
+def planner_speed_request(
+    model: str, version: int, d_obs: Real | None, planner_clearance: Real | None
+) -> safety_pb2.QueryPlannerControlRequest:
+    """A ``QueryPlannerControl`` request: the paper's rule on ``d_obs``, or the planner rule on
+    ``planner_clearance`` when it is given."""
+    request = safety_pb2.QueryPlannerControlRequest(model=model_ref(model, version))
+    if d_obs is not None:
+        request.d_obs = float(d_obs)
+    if planner_clearance is not None:
+        request.planner_clearance = float(planner_clearance)
+    return request
 
 
 def open_stream(name: str, version: int, idle_timeout: float) -> safety_pb2.TrackRequest:

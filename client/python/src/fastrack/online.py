@@ -169,7 +169,8 @@ class PlannerSpeed:
     steb_radius: float
     """TEB radius at ``beta_l`` (the sTEB)."""
     steb_exceeds_half_distance: bool
-    """The sTEB does not fit in the ball of radius ``d_obs / 2``."""
+    """The sTEB does not fit in the ball of radius ``d_obs / 2`` (under :func:`planner_rule`: in the planner's
+    clearance)."""
 
 
 def query_planner_control(rows: Sequence[SpeedRow], d_obs: float | None) -> PlannerSpeed:
@@ -189,6 +190,28 @@ def query_planner_control(rows: Sequence[SpeedRow], d_obs: float | None) -> Plan
         steb_radius=steb_radius,
         steb_exceeds_half_distance=d_obs is not None and steb_radius > d_obs / 2.0,
     )
+
+
+def planner_rule(rows: Sequence[SpeedRow], planner_clearance: float) -> PlannerSpeed:
+    """The planner rule: the largest ``beta`` whose radius is less than ``planner_clearance`` (the planner's
+    distance to the nearest sensed obstacle less the farthest one control period can move it), or ``beta_l``
+    when none is: a tracker within the bound of a planner farther than the bound from every obstacle touches
+    none of them."""
+    steb_radius = rows[0].bound
+    row = next((i for i in range(len(rows) - 1, -1, -1) if rows[i].bound < planner_clearance), 0)
+    return PlannerSpeed(
+        beta=rows[row].beta,
+        row=row,
+        dteb_radius=rows[row].bound,
+        steb_radius=steb_radius,
+        steb_exceeds_half_distance=steb_radius >= planner_clearance,
+    )
+
+
+SpeedRule = Literal["half-distance", "planner"]
+"""The rule that picks ``beta_query``: ``"half-distance"`` (the paper's queryPlannerControl on the tracker's
+distance to the nearest sensed obstacle) or ``"planner"`` (:func:`planner_rule` on the planner's own clearance,
+less one control period's reach at ``beta_u``)."""
 
 
 REANCHOR_SHARE = 0.5
@@ -518,9 +541,12 @@ class OnlineLoop:
         control_period: float,
         planner: RawPathPlanner | None = None,
         reset_candidates: int = 256,
+        rule: SpeedRule = "half-distance",
         version: int = 0,
         idle_timeout: float = 0.0,
     ) -> None:
+        if rule not in ("half-distance", "planner"):
+            raise LoopSetupError(f"rule = {rule!r}; must be 'half-distance' or 'planner'")
         if not (isinstance(control_period, (int, float)) and math.isfinite(control_period) and control_period > 0):
             raise LoopSetupError(f"control_period = {control_period}; must be a finite number of seconds > 0")
         if not (isinstance(reset_candidates, int) and reset_candidates >= 1):
@@ -539,6 +565,7 @@ class OnlineLoop:
         self.bounds: tuple[Point, Point] = (low, high)
         self.planner: RawPathPlanner = planner if planner is not None else GridAStar()
         self.reset_candidates = reset_candidates
+        self.rule: SpeedRule = rule
         info = client.get_model(model, version)
         if info.planner_dim != 2:
             raise LoopSetupError(
@@ -658,7 +685,11 @@ class OnlineLoop:
         position = self._position(tracker)
         d_obs = clearance(self._obstacles, position) if self._obstacles else None
         beta_old = self._beta_query
-        speed = query_planner_control(self._speeds, d_obs)
+        planner_clearance = self._planner_clearance()
+        if planner_clearance is None:
+            speed = query_planner_control(self._speeds, d_obs)
+        else:
+            speed = planner_rule(self._speeds, planner_clearance)
         # The flag stays set until a path is planned: a step that failed to plan plans again next time.
         self._replan_flag = self._replan_flag or newly_sensed
         replanned = self._replan_flag
@@ -678,7 +709,7 @@ class OnlineLoop:
             # A planner kept at p* must keep the smaller bound clear of the sensed obstacles.
             if clearance(self._obstacles, p_star) > speed.dteb_radius:
                 round_trips += 1
-                reply = self._tick(tracker, p_star, d_obs, speed.beta)
+                reply = self._tick(tracker, p_star, d_obs, planner_clearance, speed.beta)
             if reply is not None and reply.in_teb:
                 for _ in range(index):
                     self._raw_path.popleft()
@@ -689,7 +720,7 @@ class OnlineLoop:
                 if candidate is None:
                     return self._hold(tracker, d_obs, beta_old, speed, replanned, round_trips)
                 round_trips += 1
-                p_next, reply = candidate, self._tick(tracker, candidate, d_obs, speed.beta)
+                p_next, reply = candidate, self._tick(tracker, candidate, d_obs, planner_clearance, speed.beta)
                 self._raw_path.clear()
                 self._replan_flag = True
                 branch = "reset"
@@ -705,7 +736,7 @@ class OnlineLoop:
                     return self._steady(tracker, d_obs, beta_old, speed, replanned, 0)
                 return self._hold(tracker, d_obs, beta_old, speed, replanned, 0)
             round_trips += 1
-            reply = self._tick(tracker, p_next, d_obs, speed.beta)
+            reply = self._tick(tracker, p_next, d_obs, planner_clearance, speed.beta)
             if speed.beta > beta_old and not reply.in_teb:
                 return self._steady(tracker, d_obs, beta_old, speed, replanned, round_trips)
             self._raw_path = ahead
@@ -923,9 +954,19 @@ class OnlineLoop:
         q = self._q
         return [tracker[i] - q[2 * i] * p[0] - q[2 * i + 1] * p[1] for i in range(self._n_state)]
 
-    def _tick(self, tracker: list[float], p: Point, d_obs: float | None, beta: float) -> TrackReply:
+    def _planner_clearance(self) -> float | None:
+        """The planner rule's clearance: the planner's distance to the nearest sensed obstacle less the farthest
+        one control period can move it (None: the paper's rule, or nothing sensed)."""
+        if self.rule != "planner" or not self._obstacles:
+            return None
+        reach = math.sqrt(2.0) * self._speeds[-1].beta * self.control_period
+        return max(clearance(self._obstacles, self._planner_state) - reach, 0.0)
+
+    def _tick(
+        self, tracker: list[float], p: Point, d_obs: float | None, planner_clearance: float | None, beta: float
+    ) -> TrackReply:
         """One tick with planner state ``p``; checks the server's ``beta_query`` against ``beta``."""
-        reply = self._stream.tick(tracker, p, d_obs)
+        reply = self._stream.tick(tracker, p, d_obs, planner_clearance=planner_clearance)
         if reply.beta_query != beta:
             raise TableMismatch(local=beta, server=reply.beta_query)
         return reply

@@ -299,16 +299,26 @@ class TrackStream:
             return None
         return from_status(self._call.code(), self._call.details() or "the Track stream ended")
 
-    def send(self, tracker_state: npt.ArrayLike, planner_state: npt.ArrayLike, d_obs: convert.Real | None = None) -> int:
+    def send(
+        self,
+        tracker_state: npt.ArrayLike,
+        planner_state: npt.ArrayLike,
+        d_obs: convert.Real | None = None,
+        *,
+        planner_clearance: convert.Real | None = None,
+    ) -> int:
         """Sends one tick without waiting for its reply; returns its ``seq``.
 
         ``tracker_state`` is the tracker's state s [n_state] (dubins4d: x m, y m, heading rad, speed m/s),
         ``planner_state`` the planner's p [planner_dim] (dubins4d: x, y in metres), ``d_obs`` the distance to
-        the nearest sensed obstacle in metres (None: none sensed).
+        the nearest sensed obstacle in metres (None: none sensed); ``planner_clearance`` asks for the planner
+        rule instead (:meth:`fastrack.Client.query_planner_control`).
         """
         if self._closed:
             raise Unavailable("the Track stream is closed")
-        request = convert.tick(self._dims, self._sequence.next_seq, tracker_state, planner_state, d_obs)
+        request = convert.tick(
+            self._dims, self._sequence.next_seq, tracker_state, planner_state, d_obs, planner_clearance
+        )
         ended = self._ended()
         if self._lost:
             self._reopen("the stream's replica went away earlier")
@@ -345,9 +355,16 @@ class TrackStream:
                 raise _no_replica(why, "every replica took it and lost it again without answering")
             self._reopen(why)
 
-    def tick(self, tracker_state: npt.ArrayLike, planner_state: npt.ArrayLike, d_obs: convert.Real | None = None) -> TrackReply:
+    def tick(
+        self,
+        tracker_state: npt.ArrayLike,
+        planner_state: npt.ArrayLike,
+        d_obs: convert.Real | None = None,
+        *,
+        planner_clearance: convert.Real | None = None,
+    ) -> TrackReply:
         """Sends one tick and waits for its reply (see :meth:`send` for the arguments)."""
-        self.send(tracker_state, planner_state, d_obs)
+        self.send(tracker_state, planner_state, d_obs, planner_clearance=planner_clearance)
         return self.recv()
 
     def close(self, cancel: bool = False) -> None:
@@ -523,10 +540,17 @@ class AsyncTrackStream:
         return self._call
 
     async def send(
-        self, tracker_state: npt.ArrayLike, planner_state: npt.ArrayLike, d_obs: convert.Real | None = None
+        self,
+        tracker_state: npt.ArrayLike,
+        planner_state: npt.ArrayLike,
+        d_obs: convert.Real | None = None,
+        *,
+        planner_clearance: convert.Real | None = None,
     ) -> int:
         """Sends one tick without waiting for its reply; returns its ``seq`` (arguments as :meth:`TrackStream.send`)."""
-        request = convert.tick(self._dims, self._sequence.next_seq, tracker_state, planner_state, d_obs)
+        request = convert.tick(
+            self._dims, self._sequence.next_seq, tracker_state, planner_state, d_obs, planner_clearance
+        )
         call = self._live_call()
         if self._lost:
             await self._reopen("the stream's replica went away earlier")
@@ -581,10 +605,15 @@ class AsyncTrackStream:
             await self._reopen(why)
 
     async def tick(
-        self, tracker_state: npt.ArrayLike, planner_state: npt.ArrayLike, d_obs: convert.Real | None = None
+        self,
+        tracker_state: npt.ArrayLike,
+        planner_state: npt.ArrayLike,
+        d_obs: convert.Real | None = None,
+        *,
+        planner_clearance: convert.Real | None = None,
     ) -> TrackReply:
         """Sends one tick and waits for its reply."""
-        await self.send(tracker_state, planner_state, d_obs)
+        await self.send(tracker_state, planner_state, d_obs, planner_clearance=planner_clearance)
         return await self.recv()
 
     async def close(self, cancel: bool = False) -> None:
