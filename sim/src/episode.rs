@@ -176,6 +176,25 @@ pub struct Run {
     pub trace: Option<LoopTrace>,
 }
 
+impl Run {
+    /// The planner speed bound in use, averaged over the run's time (`None` for a method without one).
+    pub fn mean_beta(&self) -> Option<f64> {
+        let seconds: f64 = self.beta_seconds.iter().map(|(_, s)| s).sum();
+        (seconds > 0.0).then(|| self.beta_seconds.iter().map(|(beta, s)| beta * s).sum::<f64>() / seconds)
+    }
+
+    /// The share of the run's time with a planner speed bound above `beta` in use.
+    pub fn share_above(&self, beta: f64) -> f64 {
+        let seconds: f64 = self.beta_seconds.iter().map(|(_, s)| s).sum();
+        let above: f64 = self.beta_seconds.iter().filter(|(b, _)| *b > beta).map(|(_, s)| s).sum();
+        if seconds > 0.0 {
+            above / seconds
+        } else {
+            0.0
+        }
+    }
+}
+
 /// What every run against one model shares, fetched from the server (or the model in this process) once.
 pub struct Simulator {
     backend: Backend,

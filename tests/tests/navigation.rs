@@ -51,6 +51,11 @@ async fn parametric_fastrack_reaches_every_goal_safely_on_twenty_worlds() {
             assert!((seconds - periods as f64 * done.control_period).abs() < 1e-6, "world {}: beta {beta}", i + 1);
         }
         assert!(done.planning_times.len() == done.replans && done.replans > 0, "world {}: a time per replan", i + 1);
+        let (beta_l, beta_u) = (simulator.speeds()[0].beta, simulator.speeds().last().unwrap().beta);
+        let mean = done.mean_beta().expect("PF has a beta");
+        assert!(mean >= beta_l && mean <= beta_u, "world {}: mean beta {mean}", i + 1);
+        let above = done.share_above(beta_l);
+        assert!((0.0..=1.0).contains(&above) && done.share_above(beta_u) == 0.0, "world {}: {above}", i + 1);
         runs.push(done);
     }
     let all: Vec<&Run> = runs.iter().collect();

@@ -31,10 +31,13 @@ pub(super) struct Args {
     generation: Generation,
 }
 
-fn run_line(run: &Run) -> String {
+fn run_line(run: &Run, beta_l: f64) -> String {
     let latency = LatencySummary::from_latencies(&mut run.decision_times.clone());
+    let speed = run.mean_beta().map_or(String::new(), |mean| {
+        format!(" mean beta {mean:.3} m/s, above beta_l {:.0}% of the time;", 100.0 * run.share_above(beta_l))
+    });
     format!(
-        "{}: {} after {:.2} s; min clearance {:.3} m; largest error - bound {}; replans {}, resets {}, held steps {}, server calls {}, steps out of domain {}, steps past the certificate {}, steps the bound reached an obstacle {}; decision p50 {:.3} ms, p99 {:.3} ms{}",
+        "{}: {} after {:.2} s;{speed} min clearance {:.3} m; largest error - bound {}; replans {}, resets {}, held steps {}, server calls {}, steps out of domain {}, steps past the certificate {}, steps the bound reached an obstacle {}; decision p50 {:.3} ms, p99 {:.3} ms{}",
         run.method,
         run.outcome.label(),
         run.time,
@@ -75,8 +78,9 @@ pub(super) async fn run(client: &FastrackClient, args: Args, json_mode: bool) ->
         json!({"method": run.method, "outcome": run.outcome.label(), "time_s": run.time, "min_clearance_m": run.min_clearance,
                "largest_error_minus_bound_m": run.worst_excess, "replans": run.replans, "resets": run.resets, "held_steps": run.held_steps,
                "server_calls": run.round_trips, "steps_out_of_domain": run.out_of_domain, "steps_past_the_certificate": run.uncertified_steps,
-               "steps_the_bound_reached_an_obstacle": run.exposed_steps, "plot": args.plot, "plot_over_time": over}),
-        || format!("{}\nfigures: {} and {}", run_line(&run), args.plot.display(), over.display()),
+               "steps_the_bound_reached_an_obstacle": run.exposed_steps, "mean_beta": run.mean_beta(),
+               "share_above_beta_l": run.share_above(beta_l), "plot": args.plot, "plot_over_time": over}),
+        || format!("{}\nfigures: {} and {}", run_line(&run, beta_l), args.plot.display(), over.display()),
     );
     anyhow::ensure!(!run.outcome.is_unsafe(), "the run was unsafe: {}", run.outcome.label());
     Ok(())
