@@ -28,7 +28,7 @@ from dataclasses import dataclass, field
 
 import fastrack
 from fastrack.geometry import Circle, Obstacle, Point, Rectangle, Wall, clearance
-from fastrack.online import GridAStar, OnlineLoop, RawPathPlanner, StraightLine
+from fastrack.online import GridAStar, OnlineLoop, RawPathPlanner, SpeedRule, StraightLine
 
 
 @dataclass(frozen=True)
@@ -103,6 +103,7 @@ def simulate(
     substeps: int = 4,
     time_limit: float = 60.0,
     sensor_range: float | None = None,
+    rule: SpeedRule = "half-distance",
 ) -> Outcome:
     """Drives the robot through ``world`` until it is within ``goal_radius`` of the goal, leaves the safe
     set, or ``time_limit`` simulated seconds pass."""
@@ -116,6 +117,7 @@ def simulate(
         bounds=world.bounds,
         control_period=control_period,
         planner=planner,
+        rule=rule,
     ) as loop:
         sensing = sensor_range if sensor_range is not None else 2.0 * loop.speeds[-1].bound
         for k in range(math.ceil(time_limit / control_period)):
@@ -156,6 +158,9 @@ def main() -> int:
     parser.add_argument("--time-limit", type=float, default=60.0, help="simulated seconds before giving up")
     parser.add_argument("--sensor-range", type=float, default=None, help="m (default: 2 x the dTEB at beta_u)")
     parser.add_argument("--token", default=None, help="bearer token, if the server needs one")
+    parser.add_argument(
+        "--rule", choices=["half-distance", "planner"], default="half-distance", help="what picks beta_query"
+    )
     args = parser.parse_args()
     planner: RawPathPlanner = GridAStar() if args.planner == "astar" else StraightLine()
     try:
@@ -170,6 +175,7 @@ def main() -> int:
                 control_period=args.dt,
                 time_limit=args.time_limit,
                 sensor_range=args.sensor_range,
+                rule=args.rule,
             )
             elapsed = time.perf_counter() - started
     except fastrack.FastrackError as e:
