@@ -51,7 +51,7 @@ async fn runs_answered_in_process_equal_runs_over_the_server() {
     let mut reached = 0;
     for seed in 1..=3u64 {
         let world = WorldSpec { seed, inflation: service.steb_radius(), ..WorldSpec::default() }.generate().unwrap();
-        for method in [Method::Parametric, Method::MetaFastrack { levels: 3 }] {
+        for method in [Method::Parametric, Method::MetaFastrack { levels: 3, quickest: false }] {
             let what = format!("{} on world {seed}", method.label());
             let a = service.run(&world, &method, seed).await.unwrap();
             let b = in_process.run(&world, &method, seed).await.unwrap();
@@ -109,6 +109,6 @@ async fn a_golden_trace_records_every_period_and_reads_back() {
     let error = LoopTrace::read(&path).unwrap_err();
     assert!(error.contains("trace.json"), "{error}");
     // The baselines keep no trace.
-    let mf = simulator.run(&world, &Method::MetaFastrack { levels: 3 }, 2).await.unwrap();
+    let mf = simulator.run(&world, &Method::MetaFastrack { levels: 3, quickest: false }, 2).await.unwrap();
     assert!(mf.trace.is_none());
 }

@@ -112,6 +112,11 @@ async fn the_baselines_run_the_same_worlds_and_the_bounded_ones_stay_safe() {
     // On worlds both reach, PF is faster than FaSTrack at beta_l (the paper: 0.60).
     let (ratio, n) = time_ratio(&runs_of("PF"), &runs_of("F(beta_l)")).expect("PF and F(beta_l) both reach a goal");
     assert!(ratio < 1.0, "PF / F(beta_l) time to goal {ratio} over {n} worlds");
+    // Under the planner rule PF is faster than Meta-FaSTrack, however it picks its levels.
+    for mf in ["MF", "MF-quick"] {
+        let (ratio, n) = time_ratio(&runs_of("PF-planner"), &runs_of(mf)).expect("both reach a goal");
+        assert!(ratio < 1.0, "PF-planner / {mf} time to goal {ratio} over {n} worlds");
+    }
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]

@@ -1,6 +1,7 @@
 //! FaSTrack at fixed planner speeds: one level (classic FaSTrack, obstacles inflated by that row's bound), or
 //! several (Meta-FaSTrack, after Fridovich-Keil et al., ICRA 2018): at every replan the fastest level whose
-//! inflated map admits a path is chosen; a faster level is taken at once (its bound contains the slower
+//! inflated map admits a path is chosen (or, choosing the quickest, the level whose path takes the least time
+//! at its speed, a shorter path at a slower level beating a detour at a faster one); a faster level is taken at once (its bound contains the slower
 //! one's), a slower one only once the relative state lies inside that level's bound, the planner holding
 //! still until then. The control comes from the backend (`TrackingControl`) at the level's `beta`; checking
 //! a pending switch and reading the control share one call.
@@ -26,12 +27,14 @@ pub struct LevelPlanner {
     obstacles: Vec<Obstacle>,
     replan: bool,
     path_planner: TimedPlanner,
+    /// Choose the level by its path's travel time, not by its speed.
+    quickest: bool,
 }
 
 impl LevelPlanner {
     /// The levels `rows` (indices into the model's table, slowest first) with the planner at `start`; the
-    /// fastest level first.
-    pub fn new(context: Context, rows: Vec<usize>, start: Point) -> Self {
+    /// fastest level first; `quickest` chooses each replan's level by its path's travel time.
+    pub fn new(context: Context, rows: Vec<usize>, start: Point, quickest: bool) -> Self {
         let levels: Vec<SpeedRow> = rows.iter().map(|&i| context.speeds[i]).collect();
         Self {
             current: levels.len() - 1,
@@ -43,6 +46,7 @@ impl LevelPlanner {
             obstacles: Vec::new(),
             replan: true,
             path_planner: TimedPlanner::new(Box::new(GridAStar::default())),
+            quickest,
         }
     }
 
@@ -72,6 +76,38 @@ impl LevelPlanner {
         Ok(self.path_planner.plan(&request)?.into_iter().skip(1).collect())
     }
 
+    /// The level to plan with and its path: the fastest level with a path, or with `quickest` the level whose
+    /// path takes the least time at its speed (each axis at most `beta` per second).
+    fn choose(&mut self) -> Result<(usize, VecDeque<Point>), MethodError> {
+        let mut chosen: Option<(usize, VecDeque<Point>, f64)> = None;
+        for level in (0..self.levels.len()).rev() {
+            match self.plan(level) {
+                Ok(path) => {
+                    if !self.quickest {
+                        return Ok((level, path));
+                    }
+                    let seconds = self.chebyshev_length(&path) / self.levels[level].beta;
+                    if chosen.as_ref().is_none_or(|(_, _, best)| seconds < *best) {
+                        chosen = Some((level, path, seconds));
+                    }
+                }
+                Err(PlanError::NoPath { .. } | PlanError::GoalBlocked { .. }) if level > 0 || chosen.is_some() => {}
+                Err(e) => return Err(e.into()),
+            }
+        }
+        chosen.map(|(level, path, _)| (level, path)).ok_or_else(|| MethodError::Setup("no levels to plan with".into()))
+    }
+
+    /// The path's length from the planner on, each segment counted by its larger axis displacement (what a
+    /// per-axis speed bound makes it cost).
+    fn chebyshev_length(&self, path: &VecDeque<Point>) -> f64 {
+        std::iter::once(&self.planner)
+            .chain(path)
+            .zip(path)
+            .map(|(a, b)| (b[0] - a[0]).abs().max((b[1] - a[1]).abs()))
+            .sum()
+    }
+
     /// Value, membership and control at relative state `r` under level `level`'s `beta`.
     async fn answer(&self, r: &[f64], level: usize) -> Result<Answer, MethodError> {
         let (beta, n_params) = (self.levels[level].beta, self.context.n_params);
@@ -84,18 +120,7 @@ impl LevelPlanner {
         let replanned = remember(&mut self.obstacles, sensed) || self.replan;
         if replanned {
             self.replan = false;
-            let mut chosen = None;
-            for level in (0..self.levels.len()).rev() {
-                match self.plan(level) {
-                    Ok(path) => {
-                        chosen = Some((level, path));
-                        break;
-                    }
-                    Err(PlanError::NoPath { .. } | PlanError::GoalBlocked { .. }) if level > 0 => continue,
-                    Err(e) => return Err(e.into()),
-                }
-            }
-            let (level, path) = chosen.ok_or_else(|| MethodError::Setup("no levels to plan with".into()))?;
+            let (level, path) = self.choose()?;
             if level >= self.current {
                 (self.current, self.path, self.pending) = (level, path, None);
             } else {

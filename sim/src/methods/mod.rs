@@ -36,28 +36,34 @@ pub enum Method {
     FastrackSlowest,
     /// FaSTrack at the fastest table `beta`, `F(beta_u)`.
     FastrackFastest,
-    /// Meta-FaSTrack over `levels` table rows spread evenly from `beta_l` to `beta_u`, `MF`.
+    /// Meta-FaSTrack over `levels` table rows spread evenly from `beta_l` to `beta_u`: `MF`, or `MF-quick`
+    /// when each replan takes the level whose path is quickest rather than the fastest level with a path.
     MetaFastrack {
         /// How many levels (at least 2).
         levels: usize,
+        /// Choose the level by its path's travel time.
+        quickest: bool,
     },
     /// MPPI on the tracker's dynamics with the sensed obstacles in its cost and no bound.
     Mppi(MppiSettings),
 }
 
 impl Method {
-    /// The five methods of the benchmark, with their default settings.
+    /// Every method, with its default settings.
     pub fn all() -> Vec<Method> {
         vec![
             Method::FastrackSlowest,
             Method::FastrackFastest,
-            Method::MetaFastrack { levels: 3 },
+            Method::MetaFastrack { levels: 3, quickest: false },
+            Method::MetaFastrack { levels: 3, quickest: true },
             Method::Parametric,
+            Method::ParametricFastestPath,
+            Method::ParametricPlannerRule,
             Method::Mppi(MppiSettings::default()),
         ]
     }
 
-    /// Parametric FaSTrack, on either raw path: the methods that must never be unsafe.
+    /// Parametric FaSTrack, on either raw path and under either rule: the methods that must never be unsafe.
     pub fn is_parametric(&self) -> bool {
         matches!(self, Method::Parametric | Method::ParametricFastestPath | Method::ParametricPlannerRule)
     }
@@ -70,7 +76,8 @@ impl Method {
             Method::ParametricPlannerRule => "PF-planner",
             Method::FastrackSlowest => "F(beta_l)",
             Method::FastrackFastest => "F(beta_u)",
-            Method::MetaFastrack { .. } => "MF",
+            Method::MetaFastrack { quickest: false, .. } => "MF",
+            Method::MetaFastrack { quickest: true, .. } => "MF-quick",
             Method::Mppi(_) => "MPPI",
         }
     }
@@ -83,11 +90,12 @@ impl Method {
             "pf-planner" => Ok(Method::ParametricPlannerRule),
             "f-low" => Ok(Method::FastrackSlowest),
             "f-high" => Ok(Method::FastrackFastest),
-            "mf" => Ok(Method::MetaFastrack { levels: 3 }),
+            "mf" => Ok(Method::MetaFastrack { levels: 3, quickest: false }),
+            "mf-quick" => Ok(Method::MetaFastrack { levels: 3, quickest: true }),
             "mppi" => Ok(Method::Mppi(MppiSettings::default())),
-            other => {
-                Err(format!("unknown method `{other}`; expected pf, pf-fast, pf-planner, f-low, f-high, mf or mppi"))
-            }
+            other => Err(format!(
+                "unknown method `{other}`; expected pf, pf-fast, pf-planner, f-low, f-high, mf, mf-quick or mppi"
+            )),
         }
     }
 }
@@ -191,14 +199,16 @@ impl Controller {
             Method::ParametricPlannerRule => {
                 Controller::Parametric(Box::new(Parametric::start(context, start, true, SpeedRule::Planner).await?))
             }
-            Method::FastrackSlowest => Controller::Levels(Box::new(LevelPlanner::new(context, vec![0], start))),
-            Method::FastrackFastest => Controller::Levels(Box::new(LevelPlanner::new(context, vec![last], start))),
-            Method::MetaFastrack { levels } => {
+            Method::FastrackSlowest => Controller::Levels(Box::new(LevelPlanner::new(context, vec![0], start, false))),
+            Method::FastrackFastest => {
+                Controller::Levels(Box::new(LevelPlanner::new(context, vec![last], start, false)))
+            }
+            Method::MetaFastrack { levels, quickest } => {
                 if *levels < 2 {
                     return Err(MethodError::Setup(format!("Meta-FaSTrack needs at least 2 levels, got {levels}")));
                 }
                 let rows = (0..*levels).map(|k| (k * last + (levels - 1) / 2) / (levels - 1)).collect();
-                Controller::Levels(Box::new(LevelPlanner::new(context, rows, start)))
+                Controller::Levels(Box::new(LevelPlanner::new(context, rows, start, *quickest)))
             }
             Method::Mppi(settings) => Controller::Mppi(Box::new(Mppi::new(context, settings.clone())?)),
         })

@@ -27,7 +27,7 @@ pub(super) struct Args {
     /// Seeded worlds (seeds 1..=N).
     #[arg(long, default_value_t = 20)]
     worlds: u64,
-    /// Methods, comma separated (pf, pf-fast, pf-planner, f-low, f-high, mf, mppi).
+    /// Methods, comma separated (pf, pf-fast, pf-planner, f-low, f-high, mf, mf-quick, mppi).
     #[arg(long, value_delimiter = ',', default_value = "f-low,f-high,mf,pf,mppi")]
     methods: Vec<String>,
     /// Runs at once (each its own connection's stream or calls); decision latencies then include the

@@ -19,7 +19,7 @@ pub(super) struct Args {
     /// Seed of the generated world (and of the method's randomness).
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// pf, pf-fast, pf-planner, f-low, f-high, mf or mppi.
+    /// pf, pf-fast, pf-planner, f-low, f-high, mf, mf-quick or mppi.
     #[arg(long, default_value = "pf")]
     method: String,
     /// Where the trajectory figure goes (a second figure, over time, goes beside it).
