@@ -29,7 +29,7 @@ use crate::oracle::Oracle;
 use crate::raw_path::{PlanError, RawPathPlanner};
 use crate::track_oracle::TrackOracle;
 use fastrack_client::{pb, ClientError, FastrackClient};
-use fastrack_proto::planner_speed::SpeedRule;
+pub use fastrack_proto::planner_speed::SpeedRule;
 
 pub use crate::core::{Branch, StepReport};
 
