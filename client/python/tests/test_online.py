@@ -12,6 +12,7 @@ from collections import deque
 from collections.abc import Sequence
 from dataclasses import dataclass, field
 from pathlib import Path
+from types import ModuleType
 
 import numpy as np
 import numpy.typing as npt
@@ -587,12 +588,18 @@ def test_closed_loop_run_reaches_the_goal_safely(client: fastrack.Client) -> Non
 EXAMPLES = Path(__file__).resolve().parents[1] / "examples"
 
 
-def test_the_example_drives_a_small_world_with_the_straight_line(client: fastrack.Client) -> None:
+def example() -> ModuleType:
+    """The example ``examples/online_loop.py`` as a module."""
     sys.path.insert(0, str(EXAMPLES))
     try:
         import online_loop
     finally:
         sys.path.remove(str(EXAMPLES))
+    return online_loop
+
+
+def test_the_example_drives_a_small_world_with_the_straight_line(client: fastrack.Client) -> None:
+    online_loop = example()
     world = online_loop.World(
         bounds=((0.0, 0.0), (8.0, 6.0)), start=(1.0, 3.0), goal=(6.5, 3.0), obstacles=(Circle((3.5, 5.0), 0.6),)
     )
@@ -607,11 +614,7 @@ def test_the_example_drives_a_small_world_with_the_straight_line(client: fastrac
 
 
 def test_the_example_drives_its_world_faster_under_the_planner_rule(client: fastrack.Client) -> None:
-    sys.path.insert(0, str(EXAMPLES))
-    try:
-        import online_loop
-    finally:
-        sys.path.remove(str(EXAMPLES))
+    online_loop = example()
     world = online_loop.World(
         bounds=((0.0, 0.0), (12.0, 6.0)), start=(1.0, 3.0), goal=(10.5, 3.0), obstacles=(Circle((5.5, 5.4), 0.6),)
     )
