@@ -3,7 +3,7 @@
 //! decision latency), beside the paper's figures. A benchmark may be split into shards of worlds (`--shard`), each
 //! writing a [`BenchPart`]; merged, the parts give the runs a single process gives.
 
-use crate::episode::{Outcome, Run};
+use crate::episode::{add_seconds, Outcome, Run};
 use fastrack_lab::record::MarkdownTable;
 use fastrack_lab::shard::Part;
 use serde::{Deserialize, Serialize};
@@ -123,10 +123,7 @@ pub fn summarise(method: &str, runs: &[&Run]) -> Summary {
     let mean = |f: &dyn Fn(&Run) -> usize| runs.iter().map(|r| f(r) as f64).sum::<f64>() / runs.len().max(1) as f64;
     let mut beta_shares: Vec<(f64, f64)> = Vec::new();
     for &(beta, seconds) in runs.iter().flat_map(|r| &r.beta_seconds) {
-        match beta_shares.binary_search_by(|(b, _)| b.total_cmp(&beta)) {
-            Ok(i) => beta_shares[i].1 += seconds,
-            Err(i) => beta_shares.insert(i, (beta, seconds)),
-        }
+        add_seconds(&mut beta_shares, beta, seconds);
     }
     let total: f64 = beta_shares.iter().map(|(_, s)| s).sum();
     beta_shares.iter_mut().for_each(|(_, s)| *s /= total);

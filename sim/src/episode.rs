@@ -446,7 +446,7 @@ fn verification_step(info: &pb::ModelInfo) -> Result<f64, MethodError> {
 }
 
 /// Adds `seconds` to `beta`'s entry of `(beta, seconds)` pairs kept by increasing `beta`.
-fn add_seconds(pairs: &mut Vec<(f64, f64)>, beta: f64, seconds: f64) {
+pub(crate) fn add_seconds(pairs: &mut Vec<(f64, f64)>, beta: f64, seconds: f64) {
     match pairs.binary_search_by(|(b, _)| b.total_cmp(&beta)) {
         Ok(i) => pairs[i].1 += seconds,
         Err(i) => pairs.insert(i, (beta, seconds)),
