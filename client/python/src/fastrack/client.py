@@ -3,46 +3,24 @@
 from __future__ import annotations
 
 import time
-from collections.abc import Callable
 from types import TracebackType
 from typing import TypeVar
 
 import grpc
 import numpy.typing as npt
-from google.protobuf.message import Message
 from grpc_health.v1 import health_pb2
 
-from . import convert, results
-from .channel import DEFAULT_TIMEOUT_S, NO_RETRY, Retry, Settings, Tls
-from .errors import FastrackError, Unavailable, from_rpc_error
-from .replicas import Rotation, StreamCounts, all_unavailable, not_ready, replicas_wanted
+from . import calls, convert, results
+from .calls import Call, Connection
+from .channel import Endpoint
+from .replicas import not_ready, replicas_wanted
 from .track import SyncTrackStub, TrackStream
-from .v1 import models_pb2, models_pb2_grpc, safety_pb2, safety_pb2_grpc
+from .v1 import models_pb2
 
-Request = TypeVar("Request", bound=Message)
-Response = TypeVar("Response", bound=Message)
-
-HEALTH_CHECK = "/grpc.health.v1.Health/Check"
+Result = TypeVar("Result")
 
 
-class Replica:
-    """One server of a :class:`Client`: its endpoint, its channel and the stubs on it."""
-
-    def __init__(self, endpoint: str, channel: grpc.Channel) -> None:
-        self.endpoint = endpoint
-        self.channel = channel
-        self.models = models_pb2_grpc.ModelServiceStub(channel)
-        self.admin = models_pb2_grpc.ModelAdminServiceStub(channel)
-        self.safety = safety_pb2_grpc.SafetyServiceStub(channel)
-        self.health: grpc.UnaryUnaryMultiCallable[health_pb2.HealthCheckRequest, health_pb2.HealthCheckResponse]
-        self.health = channel.unary_unary(
-            HEALTH_CHECK,
-            request_serializer=health_pb2.HealthCheckRequest.SerializeToString,
-            response_deserializer=health_pb2.HealthCheckResponse.FromString,
-        )
-
-
-class Client:
+class Client(Connection[grpc.Channel]):
     """A connection to a fastrack server, or to its replicas (``fastrack.v1`` over gRPC); thread-safe, cheap
     to share.
 
@@ -51,83 +29,43 @@ class Client:
     Service): each address is a replica, and calls go round-robin over them (see :mod:`fastrack.replicas`).
     ``timeout`` is the default deadline of unary calls in seconds (each method takes its own ``timeout``
     too); ``token`` is sent as ``authorization: Bearer <token>``; ``retry`` says how idempotent unary calls
-    are retried on ``UNAVAILABLE`` (never ``Track`` nor the admin calls). Use as a context manager, or call
+    are retried on ``UNAVAILABLE`` (never ``Track`` nor the admin calls); ``max_reconnect_backoff`` is the
+    longest wait between reconnection attempts to a lost replica, seconds. Use as a context manager, or call
     :meth:`close`. Models are named by ``model`` (e.g. ``"dubins4d"``) and ``version`` (0: the server's
     default version).
     """
 
-    def __init__(
-        self,
-        address: str = "127.0.0.1:50051",
-        *,
-        timeout: float = DEFAULT_TIMEOUT_S,
-        token: str | None = None,
-        tls: Tls | None = None,
-        retry: Retry = Retry(),
-        max_reconnect_backoff: float = 1.0,
-    ) -> None:
-        self.settings = Settings(address, timeout, token, tls, retry, max_reconnect_backoff)
-        endpoints = self.settings.endpoints()
-        credentials = self.settings.credentials()
-        self._replicas = Rotation([Replica(e.target, self.settings.sync_channel(e, credentials)) for e in endpoints])
-        self._streams = StreamCounts(self.endpoints)
-        self._dims: dict[tuple[str, int], convert.Dims] = {}
+    def _open(self, endpoint: Endpoint, credentials: grpc.ChannelCredentials | None) -> grpc.Channel:
+        return self.settings.sync_channel(endpoint, credentials)
 
-    @property
-    def stream_counts(self) -> list[int]:
-        """This client's open ``Track`` streams on each replica, in the order of :attr:`endpoints`."""
-        return self._streams.counts()
-
-    @property
-    def endpoints(self) -> list[str]:
-        """The replicas' endpoints (``host:port``), in round-robin order."""
-        return [replica.endpoint for replica in self._replicas.replicas]
-
-    @property
-    def channel(self) -> grpc.Channel:
-        """The gRPC channel to the first replica (for stubs of one's own)."""
-        return self._replicas.replicas[0].channel
-
-    def _unary(
-        self,
-        rpc: Callable[[Replica], grpc.UnaryUnaryMultiCallable[Request, Response]],
-        request: Request,
-        timeout: float | None,
-        idempotent: bool = True,
-    ) -> Response:
-        """One unary call with the token and deadline. ``idempotent``: on the next replica, then on the
-        following ones while they answer UNAVAILABLE, the whole pass repeated with backoff as the retry
-        policy says; otherwise on the next replica only, once."""
-        policy = self.settings.retry if idempotent else NO_RETRY
-        deadline = self.settings.timeout if timeout is None else timeout
-        for attempt in range(policy.attempts):
-            failures: list[tuple[str, FastrackError]] = []
-            for replica in self._replicas.rotation() if idempotent else [self._replicas.next()]:
+    def _send(self, call: Call[calls.Reply, Result], timeout: float | None) -> Result:
+        """One unary call with the token and deadline, over the replicas as :class:`fastrack.calls.Attempts`
+        says."""
+        attempts = self._attempts(call.idempotent)
+        for wait, replicas in attempts.passes():
+            time.sleep(wait)
+            for replica in replicas:
                 try:
-                    return rpc(replica)(request, timeout=deadline, metadata=self.settings.metadata)
+                    deadline = self._deadline(timeout)
+                    reply = call.rpc(replica)(call.request, timeout=deadline, metadata=self.settings.metadata)
                 except grpc.RpcError as e:
-                    error = from_rpc_error(e)
-                if not isinstance(error, Unavailable):
-                    raise error
-                failures.append((replica.endpoint, error))
-            if attempt + 1 == policy.attempts:
-                raise all_unavailable(failures)
-            time.sleep(policy.delay(attempt))
-        raise AssertionError("unreachable: Retry.attempts >= 1")
+                    attempts.failed(replica, e)
+                else:
+                    return call.finish(reply)
+        raise attempts.exhausted()
 
     def health(self, service: str = "", *, timeout: float | None = None) -> str:
         """The health (``grpc.health.v1``) of the next replica: ``"SERVING"``, ``"NOT_SERVING"``, ..."""
-        request = health_pb2.HealthCheckRequest(service=service)
-        reply = self._unary(lambda r: r.health, request, timeout, idempotent=False)
-        return health_pb2.HealthCheckResponse.ServingStatus.Name(reply.status)
+        return self._send(calls.health(service), timeout)
 
     def serving_replicas(self, *, timeout: float | None = None) -> list[str]:
         """The endpoints of the replicas whose health is ``SERVING`` now (each asked once)."""
-        deadline = self.settings.timeout if timeout is None else timeout
+        deadline = self._deadline(timeout)
         serving = []
         for replica in self._replicas.replicas:
             try:
-                reply = replica.health(health_pb2.HealthCheckRequest(), timeout=deadline, metadata=self.settings.metadata)
+                request = health_pb2.HealthCheckRequest()
+                reply = replica.health(request, timeout=deadline, metadata=self.settings.metadata)
             except grpc.RpcError:
                 continue
             if reply.status == health_pb2.HealthCheckResponse.SERVING:
@@ -149,14 +87,11 @@ class Client:
 
     def list_models(self, *, timeout: float | None = None) -> list[models_pb2.ModelInfo]:
         """Every loaded model version, by name then version."""
-        return list(self._unary(lambda r: r.models.ListModels, models_pb2.ListModelsRequest(), timeout).models)
+        return self._send(calls.list_models(), timeout)
 
     def get_model(self, model: str, version: int = 0, *, timeout: float | None = None) -> models_pb2.ModelInfo:
         """One model version's description: state, parameters, controls (with units and bounds), TEB table."""
-        request = models_pb2.GetModelRequest(model=convert.model_ref(model, version))
-        info = self._unary(lambda r: r.models.GetModel, request, timeout).model
-        self._dims[(model, version)] = convert.Dims.of(info)
-        return info
+        return self._remember(model, version, self._send(calls.get_model(model, version), timeout))
 
     def dims(self, model: str, version: int = 0) -> convert.Dims:
         """The model's vector sizes, fetched once (``GetModel``) and cached."""
@@ -182,8 +117,7 @@ class Client:
         obstacle less the farthest one control period can move it, metres) the planner rule answers instead:
         the fastest planner speed bound whose TEB is less than it.
         """
-        request = convert.planner_speed_request(model, version, d_obs, planner_clearance)
-        return convert.planner_control(self._unary(lambda r: r.safety.QueryPlannerControl, request, timeout))
+        return self._send(calls.query_planner_control(model, version, d_obs, planner_clearance), timeout)
 
     def tracking_error_bound(
         self,
@@ -196,10 +130,7 @@ class Client:
     ) -> results.TrackingErrorBound:
         """The tracking error bound for planner speed bound ``beta`` (m/s, within the model's range), with
         ``boundary_points`` points on its boundary (0: none, at most 4096)."""
-        request = safety_pb2.GetTrackingErrorBoundRequest(
-            model=convert.model_ref(model, version), beta=float(beta), boundary_points=boundary_points
-        )
-        return convert.tracking_error_bound(self._unary(lambda r: r.safety.GetTrackingErrorBound, request, timeout))
+        return self._send(calls.tracking_error_bound(model, version, beta, boundary_points), timeout)
 
     def evaluate(
         self,
@@ -217,12 +148,8 @@ class Client:
         [N, n_params] (the shipped dubins4d has one, beta in m/s; :meth:`get_model` lists a model's), or one
         row (or number) for every item. Shapes are checked against the model before sending.
         """
-        dims = self.dims(model, version)
-        s, p, n = convert.batch(dims, states, params)
-        request = safety_pb2.EvaluateValueRequest(
-            model=convert.model_ref(model, version), states=s, params=p, out_of_domain=convert.policy(out_of_domain)
-        )
-        return convert.evaluation(self._unary(lambda r: r.safety.EvaluateValue, request, timeout), dims, n)
+        batch = calls.Batch(self.dims(model, version), model, version, states, params, out_of_domain)
+        return self._send(calls.evaluate(batch), timeout)
 
     def tracking_control(
         self,
@@ -235,21 +162,16 @@ class Client:
         timeout: float | None = None,
     ) -> results.TrackingControl:
         """The optimal tracking control u* (with V and TEB membership) for a batch; arguments as :meth:`evaluate`."""
-        dims = self.dims(model, version)
-        s, p, n = convert.batch(dims, states, params)
-        request = safety_pb2.TrackingControlRequest(
-            model=convert.model_ref(model, version), states=s, params=p, out_of_domain=convert.policy(out_of_domain)
-        )
-        return convert.tracking_control(self._unary(lambda r: r.safety.TrackingControl, request, timeout), dims, n)
+        batch = calls.Batch(self.dims(model, version), model, version, states, params, out_of_domain)
+        return self._send(calls.tracking_control(batch), timeout)
 
     def track(self, model: str, *, version: int = 0, idle_timeout: float = 0.0) -> TrackStream:
         """Opens a ``Track`` stream for one robot on the next replica that takes it (no deadline; the server
         closes it after ``idle_timeout`` seconds without a tick, 0: the server's default). Use as ``with
         client.track("dubins4d") as robot``. The stream moves to another replica when its own goes away
         (see :mod:`fastrack.track`)."""
-        dims = self.dims(model, version)
-        open_request = convert.open_stream(model, version, idle_timeout)
-        return TrackStream(self._track_stubs, self._streams, self.settings.metadata, dims, open_request)
+        self.dims(model, version)  # fetches the sizes the stream checks its ticks against
+        return TrackStream(self._opening(self._track_stubs, model, version, idle_timeout))
 
     def _track_stubs(self) -> list[tuple[str, SyncTrackStub]]:
         return [(replica.endpoint, replica.safety.Track) for replica in self._replicas.rotation()]
@@ -257,18 +179,15 @@ class Client:
     def load_model(self, name: str, version: int = 0, *, timeout: float | None = None) -> list[int]:
         """Admin, on the next replica only: loads a model from its repository (version 0: every version); the
         loaded versions."""
-        request = models_pb2.LoadModelRequest(name=name, version=version)
-        return list(self._unary(lambda r: r.admin.LoadModel, request, timeout, idempotent=False).loaded_versions)
+        return self._send(calls.load_model(name, version), timeout)
 
     def unload_model(self, name: str, version: int = 0, *, timeout: float | None = None) -> list[int]:
         """Admin: stops serving a model (version 0: every version); the unloaded versions."""
-        request = models_pb2.UnloadModelRequest(name=name, version=version)
-        return list(self._unary(lambda r: r.admin.UnloadModel, request, timeout, idempotent=False).unloaded_versions)
+        return self._send(calls.unload_model(name, version), timeout)
 
     def reload_model(self, name: str = "", *, timeout: float | None = None) -> list[models_pb2.ReloadOutcome]:
         """Admin: re-reads a model (empty name: the whole repository) from disk; one outcome per version."""
-        request = models_pb2.ReloadModelRequest(name=name)
-        return list(self._unary(lambda r: r.admin.ReloadModel, request, timeout, idempotent=False).outcomes)
+        return self._send(calls.reload_model(name), timeout)
 
     def close(self) -> None:
         """Closes the connections (open streams end)."""

@@ -36,8 +36,9 @@ import threading
 import time
 from collections import deque
 from collections.abc import Callable
+from dataclasses import dataclass
 from types import TracebackType
-from typing import TypeAlias, TypeVar
+from typing import Generic, TypeAlias, TypeVar
 
 import grpc
 import grpc.aio
@@ -52,9 +53,6 @@ from .v1 import safety_pb2
 TrackCall = grpc.aio.StreamStreamCall[safety_pb2.TrackRequest, safety_pb2.TrackResponse]
 SyncTrackStub: TypeAlias = "grpc.StreamStreamMultiCallable[safety_pb2.TrackRequest, safety_pb2.TrackResponse]"
 AsyncTrackStub: TypeAlias = "grpc.aio.StreamStreamMultiCallable[safety_pb2.TrackRequest, safety_pb2.TrackResponse]"
-SyncReplicas: TypeAlias = "Callable[[], list[tuple[str, SyncTrackStub]]]"
-"""The replicas to open a stream on, in the order to try them: ``(endpoint, Track stub)`` pairs."""
-AsyncReplicas: TypeAlias = "Callable[[], list[tuple[str, AsyncTrackStub]]]"
 Stub = TypeVar("Stub")
 
 
@@ -163,26 +161,37 @@ def _why(error: FastrackError) -> str:
     return f"the stream's replica went away ({error.code.name}: {error.message})"
 
 
-class TrackStream:
-    """A sync ``Track`` stream; use as a context manager (``with client.track("dubins4d") as robot``)."""
+@dataclass(frozen=True)
+class Opening(Generic[Stub]):
+    """What a client gives a stream it opens."""
 
-    def __init__(
-        self,
-        replicas: SyncReplicas,
-        counts: StreamCounts,
-        metadata: tuple[tuple[str, str], ...],
-        dims: convert.Dims,
-        open_request: safety_pb2.TrackRequest,
-    ) -> None:
-        self._replicas = replicas
-        self._counts = counts
-        self._metadata = metadata
-        self._dims = dims
-        self._open_request = open_request
+    replicas: Callable[[], list[tuple[str, Stub]]]
+    """The replicas to open on, in the order to try them: ``(endpoint, Track stub)`` pairs."""
+    counts: StreamCounts
+    """The client's open streams per replica."""
+    metadata: tuple[tuple[str, str], ...]
+    """Call metadata (the bearer token)."""
+    dims: convert.Dims
+    """The model's vector sizes."""
+    open_request: safety_pb2.TrackRequest
+    """The stream's first message."""
+
+
+class _Stream(Generic[Stub]):
+    """What both kinds of stream keep: how they open, the ticks not answered yet, and the counts of moves."""
+
+    def __init__(self, opening: Opening[Stub]) -> None:
+        self._replicas = opening.replicas
+        self._counts = opening.counts
+        self._metadata = opening.metadata
+        self._dims = opening.dims
+        self._open_request = opening.open_request
         self._sequence = _Sequence()
         self._closed = False
         self._lost = False
         self._replica_count = 1
+        self._pace = _BalancePace()
+        self._stubs: dict[str, Stub] = {}
         self.reopened = 0
         """How often the stream moved to another replica."""
         self.resent = 0
@@ -191,8 +200,45 @@ class TrackStream:
         """How often the stream moved, with nothing lost, to even the load over the replicas."""
         self.endpoint = ""
         """The replica serving the stream now."""
-        self._pace = _BalancePace()
-        self._stubs: dict[str, SyncTrackStub] = {}
+
+    def _tick_request(
+        self,
+        tracker_state: npt.ArrayLike,
+        planner_state: npt.ArrayLike,
+        d_obs: convert.Real | None,
+        planner_clearance: convert.Real | None,
+    ) -> safety_pb2.TrackRequest:
+        """The next tick, its vectors checked against the model."""
+        seq = self._sequence.next_seq
+        return convert.tick(self._dims, seq, tracker_state, planner_state, d_obs, planner_clearance)
+
+    def _candidates(self, lost: str | None) -> list[tuple[str, Stub]]:
+        """The replicas to open on now, ``lost`` last; remembers how many there are and their stubs."""
+        candidates = self._replicas()
+        self._replica_count, self._stubs = len(candidates), dict(candidates)
+        return _order(candidates, lost)
+
+    def _opened(self, lost: str | None, resent: int) -> None:
+        """Counts a move after ``lost`` went away, with ``resent`` ticks sent again."""
+        if lost is not None:
+            self.reopened += 1
+            self.resent += resent
+
+    def _balance_target(self) -> tuple[str, Stub] | None:
+        """The lighter replica to open a second stream on, when it is time to look and one is."""
+        return self._pace.target(self._counts, self._stubs, self.endpoint)
+
+    def _give_up(self) -> None:
+        """No replica took the stream: the ticks waiting are dropped, the next send tries again."""
+        self._lost = True
+        self._sequence.pending.clear()
+
+
+class TrackStream(_Stream[SyncTrackStub]):
+    """A sync ``Track`` stream; use as a context manager (``with client.track("dubins4d") as robot``)."""
+
+    def __init__(self, opening: Opening[SyncTrackStub]) -> None:
+        super().__init__(opening)
         self._move: list[_SyncOpened | None] | None = None
         """A stream being opened in the background on a lighter replica: empty until the thread is done."""
         self._requests: queue.SimpleQueue[safety_pb2.TrackRequest | None] = queue.SimpleQueue()
@@ -204,9 +250,7 @@ class TrackStream:
         unanswered ticks there. Raises the error of a replica that refuses the stream (``raise_as_is``) or
         :class:`Unavailable` saying ``why`` the stream had to move."""
         failures: list[tuple[str, FastrackError]] = []
-        candidates = self._replicas()
-        self._replica_count, self._stubs = len(candidates), dict(candidates)
-        for endpoint, stub in _order(candidates, lost):
+        for endpoint, stub in self._candidates(lost):
             opened = self._open_on(endpoint, stub)
             if isinstance(opened, FastrackError):
                 if not _passed_over(opened):
@@ -217,9 +261,7 @@ class TrackStream:
             for request in resend:
                 opened.requests.put(request)
             self._switch(opened)
-            if lost is not None:
-                self.reopened += 1
-                self.resent += len(resend)
+            self._opened(lost, len(resend))
             return
         raise _refused(why, failures, raise_as_is)
 
@@ -252,7 +294,7 @@ class TrackStream:
                     self._switch(opened)
                     self.rebalanced += 1
             return
-        target = self._pace.target(self._counts, self._stubs, self.endpoint)
+        target = self._balance_target()
         if target is None:
             return
         lighter, stub = target
@@ -283,11 +325,6 @@ class TrackStream:
             self._give_up()
             raise
 
-    def _give_up(self) -> None:
-        """No replica took the stream: the ticks waiting are dropped, the next send tries again."""
-        self._lost = True
-        self._sequence.pending.clear()
-
     def _abandon(self) -> None:
         self._requests.put(None)
         if self._call is not None:
@@ -316,9 +353,7 @@ class TrackStream:
         """
         if self._closed:
             raise Unavailable("the Track stream is closed")
-        request = convert.tick(
-            self._dims, self._sequence.next_seq, tracker_state, planner_state, d_obs, planner_clearance
-        )
+        request = self._tick_request(tracker_state, planner_state, d_obs, planner_clearance)
         ended = self._ended()
         if self._lost:
             self._reopen("the stream's replica went away earlier")
@@ -395,39 +430,14 @@ class TrackStream:
         self.close(cancel=error is not None)
 
 
-class AsyncTrackStream:
+class AsyncTrackStream(_Stream[AsyncTrackStub]):
     """An asyncio ``Track`` stream; use with ``async with client.track("dubins4d") as robot``."""
 
-    def __init__(
-        self,
-        replicas: AsyncReplicas,
-        counts: StreamCounts,
-        metadata: tuple[tuple[str, str], ...],
-        dims: convert.Dims,
-        open_request: safety_pb2.TrackRequest,
-    ) -> None:
-        self._replicas = replicas
-        self._counts = counts
-        self._metadata = metadata
-        self._dims = dims
-        self._open_request = open_request
-        self._sequence = _Sequence()
-        self._lost = False
-        self._replica_count = 1
+    def __init__(self, opening: Opening[AsyncTrackStub]) -> None:
+        super().__init__(opening)
         self._call: TrackCall | None = None
-        self.reopened = 0
-        """How often the stream moved to another replica."""
-        self.resent = 0
-        """Ticks sent again after a move, because their first replica never answered them."""
-        self.rebalanced = 0
-        """How often the stream moved, with nothing lost, to even the load over the replicas."""
-        self.endpoint = ""
-        """The replica serving the stream now."""
-        self._pace = _BalancePace()
-        self._stubs: dict[str, AsyncTrackStub] = {}
         self._move: asyncio.Task[tuple[str, TrackCall] | None] | None = None
         """A stream being opened on a lighter replica, for the next move."""
-        self._closed = False
 
     @staticmethod
     async def _status(call: TrackCall, fallback: FastrackError | None = None) -> FastrackError:
@@ -439,16 +449,12 @@ class AsyncTrackStream:
     async def _open_somewhere(self, lost: str | None, raise_as_is: bool = False, why: str = "") -> None:
         """As :meth:`TrackStream._open_somewhere`."""
         failures: list[tuple[str, FastrackError]] = []
-        candidates = self._replicas()
-        self._replica_count, self._stubs = len(candidates), dict(candidates)
-        for endpoint, stub in _order(candidates, lost):
+        for endpoint, stub in self._candidates(lost):
             resend = self._sequence.requests()
             call, error = await self._open_on(stub, resend)
             if error is None:
                 self._switch(endpoint, call)
-                if lost is not None:
-                    self.reopened += 1
-                    self.resent += len(resend)
+                self._opened(lost, len(resend))
                 return
             if not _passed_over(error):
                 raise error if raise_as_is else _no_replica(why, f"{endpoint}: {error.code.name}: {error.message}")
@@ -501,7 +507,7 @@ class AsyncTrackStream:
                     self._switch(*opened)
                     self.rebalanced += 1
             return
-        target = self._pace.target(self._counts, self._stubs, self.endpoint)
+        target = self._balance_target()
         if target is None:
             return
 
@@ -523,11 +529,6 @@ class AsyncTrackStream:
             self._give_up()
             raise
 
-    def _give_up(self) -> None:
-        """No replica took the stream: the ticks waiting are dropped, the next send tries again."""
-        self._lost = True
-        self._sequence.pending.clear()
-
     async def open(self) -> AsyncTrackStream:
         """Opens the stream on the client's next replica that takes it (done by ``async with``)."""
         if self._call is None:
@@ -548,9 +549,7 @@ class AsyncTrackStream:
         planner_clearance: convert.Real | None = None,
     ) -> int:
         """Sends one tick without waiting for its reply; returns its ``seq`` (arguments as :meth:`TrackStream.send`)."""
-        request = convert.tick(
-            self._dims, self._sequence.next_seq, tracker_state, planner_state, d_obs, planner_clearance
-        )
+        request = self._tick_request(tracker_state, planner_state, d_obs, planner_clearance)
         call = self._live_call()
         if self._lost:
             await self._reopen("the stream's replica went away earlier")
