@@ -163,16 +163,7 @@ fn write_bundle(
         },
         teb_table,
         untrained: false,
-        provenance: Provenance {
-            method: "least-squares fit to the grid solution (test)".into(),
-            config: serde_json::json!({}),
-            iterations: 0,
-            final_losses: Default::default(),
-            wall_time_s: 0.0,
-            machine: String::new(),
-            source_revision: String::new(),
-            created: String::new(),
-        },
+        provenance: Provenance::untrained("least-squares fit to the grid solution (test)", serde_json::json!({})),
         onnx_sha256: String::new(),
     };
     Bundle::write(root, manifest, &onnx).unwrap()

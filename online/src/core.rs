@@ -73,6 +73,9 @@ pub struct ModelView {
 /// set of the row in force moves the planner back into it.
 pub const REANCHOR_SHARE: f64 = 0.5;
 
+/// Reset candidates a reset asks about before the planner holds, unless the settings say otherwise.
+pub const DEFAULT_RESET_CANDIDATES: usize = 256;
+
 /// How the core runs.
 #[derive(Debug, Clone, Copy, PartialEq)]
 pub struct CoreSettings {

@@ -23,10 +23,10 @@
 //! The oracle's `beta_query` is checked against the local one: a table that changed under the loop (the
 //! model was reloaded) is fetched again and the step repeated once.
 
-use crate::core::{CoreError, CoreSettings, LoopCore, Progress};
+use crate::core::{CoreError, CoreSettings, LoopCore, Progress, DEFAULT_RESET_CANDIDATES};
 use crate::geometry::{Obstacle, Point};
 use crate::oracle::Oracle;
-use crate::raw_path::{PlanError, RawPathPlanner};
+use crate::raw_path::RawPathPlanner;
 use crate::track_oracle::TrackOracle;
 use fastrack_client::{pb, ClientError, FastrackClient};
 pub use fastrack_proto::planner_speed::SpeedRule;
@@ -74,15 +74,10 @@ pub enum LoopError {
         /// Why.
         message: String,
     },
-    /// The raw path could not be planned.
+    /// The core could not take or finish the step (no raw path, unusable settings or model, a tracker
+    /// state that does not fit).
     #[error(transparent)]
-    Plan(#[from] PlanError),
-    /// The model cannot drive this loop, or the loop's settings are unusable.
-    #[error("{0}")]
-    Setup(String),
-    /// The tracker state does not fit the model.
-    #[error("tracker state: {0}")]
-    Tracker(String),
+    Core(CoreError),
     /// The server's `beta_query` still differed from the loop's after the table was fetched again.
     #[error("the server chose beta {server} where the table gives {local}: the model changes under the loop")]
     TableMismatch {
@@ -96,15 +91,26 @@ pub enum LoopError {
 impl From<CoreError> for LoopError {
     fn from(e: CoreError) -> Self {
         match e {
-            CoreError::Plan(e) => LoopError::Plan(e),
-            CoreError::Tracker(why) => LoopError::Tracker(why),
             CoreError::NoRow { beta_old, beta_u } => LoopError::TableMismatch { local: beta_old, server: beta_u },
-            other => LoopError::Setup(other.to_string()),
+            other => LoopError::Core(other),
         }
     }
 }
 
 impl LoopSettings {
+    /// Settings for `model` at `control_period` toward `goal` in `bounds`, with
+    /// [`DEFAULT_RESET_CANDIDATES`] and the paper's rule.
+    pub fn new(model: pb::ModelRef, control_period: f64, goal: Point, bounds: (Point, Point)) -> Self {
+        Self {
+            model,
+            control_period,
+            goal,
+            bounds,
+            reset_candidates: DEFAULT_RESET_CANDIDATES,
+            rule: SpeedRule::default(),
+        }
+    }
+
     /// The core's share of the settings.
     pub fn core(&self) -> CoreSettings {
         CoreSettings {

@@ -2,7 +2,8 @@
 //! membership, `u*` in one round trip), `TrackingControl` answers the batches (reset candidates, a held
 //! state), and `GetModel` gives the table.
 
-use crate::core::{Answer, ModelView, Query};
+use crate::core::{Answer, CoreError, ModelView, Query};
+use crate::geometry::Point;
 use crate::online_loop::LoopError;
 use crate::oracle::Oracle;
 use fastrack_client::{pb, FastrackClient, TrackStream};
@@ -10,6 +11,30 @@ use fastrack_proto::planner_speed::SpeedRow;
 
 /// Out-of-domain states are answered with a flag, as on the `Track` stream.
 const FLAG: pb::OutOfDomainPolicy = pb::OutOfDomainPolicy::Flag;
+
+/// The `Track` tick numbered `seq` that asks what a [`Query::Tick`] with these fields asks.
+pub fn track_tick(
+    seq: u64,
+    tracker: &[f64],
+    planner: &Point,
+    d_obs: Option<f64>,
+    planner_clearance: Option<f64>,
+) -> pb::TrackTick {
+    pb::TrackTick { seq, tracker_state: tracker.to_vec(), planner_state: planner.to_vec(), d_obs, planner_clearance }
+}
+
+impl From<pb::TrackReply> for Answer {
+    /// The answer a tick's reply gives (its `seq`, `beta_query` and error checked by the caller).
+    fn from(reply: pb::TrackReply) -> Self {
+        Self {
+            relative_state: reply.relative_state,
+            value: reply.value,
+            in_set: reply.in_teb,
+            in_domain: reply.in_domain,
+            control: reply.control,
+        }
+    }
+}
 
 /// The horizon over which the model's rows were verified: the shortest of them (`None`: no row verified).
 pub fn certificate_horizon(info: &pb::ModelInfo) -> Option<f64> {
@@ -20,10 +45,10 @@ pub fn certificate_horizon(info: &pb::ModelInfo) -> Option<f64> {
 /// model's planner must be 2-D.
 pub fn model_view(info: &pb::ModelInfo) -> Result<ModelView, LoopError> {
     if info.planner_dim != 2 {
-        return Err(LoopError::Setup(format!(
+        return Err(LoopError::Core(CoreError::Setup(format!(
             "model {} has a {}-D planner; the online loop plans in the plane (2-D planners)",
             info.name, info.planner_dim
-        )));
+        ))));
     }
     Ok(ModelView {
         speeds: info.teb_table.iter().map(SpeedRow::from).collect(),
@@ -49,10 +74,10 @@ pub async fn batch_answers(
     let n_control = reply.controls.len() / count.max(1);
     let fits = reply.values.len() == count && reply.in_teb.len() == count && reply.in_domain.len() == count;
     if !fits || reply.controls.len() != count * n_control {
-        return Err(LoopError::Setup(format!(
+        return Err(LoopError::Core(CoreError::Setup(format!(
             "TrackingControl answered a batch of {count} with {} values",
             reply.values.len()
-        )));
+        ))));
     }
     Ok((0..count)
         .map(|i| Answer {
@@ -96,13 +121,7 @@ impl Oracle for TrackOracle {
             Query::Tick { tracker, planner, d_obs, planner_clearance, beta } => {
                 let seq = self.seq;
                 self.seq += 1;
-                let tick = pb::TrackTick {
-                    seq,
-                    tracker_state: tracker.clone(),
-                    planner_state: planner.to_vec(),
-                    d_obs: *d_obs,
-                    planner_clearance: *planner_clearance,
-                };
+                let tick = track_tick(seq, tracker, planner, *d_obs, *planner_clearance);
                 let reply = self.stream.tick(tick).await?;
                 if let Some(error) = reply.error {
                     return Err(LoopError::Tick { seq, code: error.code, message: error.message });
@@ -110,13 +129,7 @@ impl Oracle for TrackOracle {
                 if reply.beta_query != *beta {
                     return Err(LoopError::TableMismatch { local: *beta, server: reply.beta_query });
                 }
-                Ok(vec![Answer {
-                    relative_state: reply.relative_state,
-                    value: reply.value,
-                    in_set: reply.in_teb,
-                    in_domain: reply.in_domain,
-                    control: reply.control,
-                }])
+                Ok(vec![reply.into()])
             }
             Query::Batch { states, beta } => {
                 let model = self.model.clone();

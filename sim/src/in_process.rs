@@ -7,7 +7,7 @@ use fastrack_client::pb;
 use fastrack_online::core::{Answer, ModelView, Query};
 use fastrack_online::online_loop::LoopError;
 use fastrack_online::oracle::Oracle;
-use fastrack_online::track_oracle::model_view;
+use fastrack_online::track_oracle::{model_view, track_tick};
 use fastrack_proto::planner_speed::SpeedRow;
 use fastrack_server::loaded_model::LoadedModel;
 use fastrack_server::services::track::TickQuestion;
@@ -85,27 +85,14 @@ impl Oracle for LocalOracle {
     async fn answer(&mut self, query: &Query) -> Result<Vec<Answer>, LoopError> {
         match query {
             Query::Tick { tracker, planner, d_obs, planner_clearance, beta } => {
-                let tick = pb::TrackTick {
-                    seq: 0,
-                    tracker_state: tracker.clone(),
-                    planner_state: planner.to_vec(),
-                    d_obs: *d_obs,
-                    planner_clearance: *planner_clearance,
-                };
+                let tick = track_tick(0, tracker, planner, *d_obs, *planner_clearance);
                 let model = &self.local.model;
                 let (question, batch) = TickQuestion::new(model, &tick).map_err(refused)?;
                 if question.speed.beta != *beta {
                     return Err(LoopError::TableMismatch { local: *beta, server: question.speed.beta });
                 }
                 let result = model.answer(&batch).map_err(refused)?;
-                let reply = question.reply(result, &batch);
-                Ok(vec![Answer {
-                    relative_state: reply.relative_state,
-                    value: reply.value,
-                    in_set: reply.in_teb,
-                    in_domain: reply.in_domain,
-                    control: reply.control,
-                }])
+                Ok(vec![question.reply(result, &batch).into()])
             }
             Query::Batch { states, beta } => self.local.batch(states, *beta),
         }

@@ -112,27 +112,17 @@ fn main() -> anyhow::Result<()> {
                 let (s, p) = inputs(n);
                 let states: Vec<f64> = s.iter().map(|&x| x.into()).collect();
                 let params: Vec<f64> = p.iter().map(|&x| x.into()).collect();
+                let call = || {
+                    let flag = pb::OutOfDomainPolicy::Flag;
+                    client.tracking_control(model_ref("bench", 0), states.clone(), params.clone(), flag)
+                };
                 for _ in 0..200 {
-                    client
-                        .tracking_control(
-                            model_ref("bench", 0),
-                            states.clone(),
-                            params.clone(),
-                            pb::OutOfDomainPolicy::Flag,
-                        )
-                        .await?;
+                    call().await?;
                 }
                 let mut micros = Vec::with_capacity(calls);
                 for _ in 0..calls {
                     let start = Instant::now();
-                    client
-                        .tracking_control(
-                            model_ref("bench", 0),
-                            states.clone(),
-                            params.clone(),
-                            pb::OutOfDomainPolicy::Flag,
-                        )
-                        .await?;
+                    call().await?;
                     micros.push(start.elapsed().as_secs_f64() * 1e6);
                 }
                 micros.sort_by(f64::total_cmp);

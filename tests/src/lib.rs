@@ -92,14 +92,10 @@ pub fn write_network_bundle(
         teb_table: hand_made_table(system),
         untrained: true,
         provenance: Provenance {
-            method: "test fixture".into(),
-            config: serde_json::json!({ "hidden": network.hidden_widths() }),
-            iterations: 0,
-            final_losses: Default::default(),
-            wall_time_s: 0.0,
             machine: "test".into(),
             source_revision: "test".into(),
             created: "2026-01-01T00:00:00Z".into(),
+            ..Provenance::untrained("test fixture", serde_json::json!({ "hidden": network.hidden_widths() }))
         },
         onnx_sha256: String::new(),
     };

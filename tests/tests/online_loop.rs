@@ -6,10 +6,10 @@
 
 use fastrack_client::{model_ref, pb, FastrackClient};
 use fastrack_e2e::TestServer;
+use fastrack_online::core::CoreError;
 use fastrack_online::geometry::{clearance, Obstacle};
 use fastrack_online::online_loop::{Branch, LoopError, LoopSettings, OnlineLoop};
 use fastrack_online::raw_path::GridAStar;
-use fastrack_proto::planner_speed::SpeedRule;
 use std::f64::consts::FRAC_PI_2;
 use std::path::Path;
 
@@ -17,14 +17,8 @@ use std::path::Path;
 const ALONG_X: f64 = FRAC_PI_2;
 
 fn settings() -> LoopSettings {
-    LoopSettings {
-        model: model_ref("dubins4d", 0),
-        control_period: 0.1,
-        goal: [10.0, 0.0],
-        bounds: ([-2.0, -6.0], [12.0, 6.0]),
-        reset_candidates: 64,
-        rule: SpeedRule::HalfDistance,
-    }
+    let field = ([-2.0, -6.0], [12.0, 6.0]);
+    LoopSettings { reset_candidates: 64, ..LoopSettings::new(model_ref("dubins4d", 0), 0.1, [10.0, 0.0], field) }
 }
 
 async fn shipped_server() -> (TestServer, FastrackClient) {
@@ -204,11 +198,11 @@ async fn bad_tracker_states_and_a_vanished_server_are_errors() {
     let mut online = OnlineLoop::start(&client, settings(), [0.0, 0.0]).await.unwrap();
     let mut planner = GridAStar::default();
     let short = online.step(&[0.0, 0.0, 1.0], &[], &mut planner).await.unwrap_err();
-    assert!(matches!(short, LoopError::Tracker(_)), "{short}");
+    assert!(matches!(short, LoopError::Core(CoreError::Tracker(_))), "{short}");
     let nan = online.step(&[0.0, f64::NAN, 1.0, 1.0], &[], &mut planner).await.unwrap_err();
     assert!(nan.to_string().contains("tracker[1]"), "{nan}");
     let bad_period = OnlineLoop::start(&client, LoopSettings { control_period: 0.0, ..settings() }, [0.0, 0.0]).await;
-    assert!(matches!(bad_period, Err(LoopError::Setup(_))));
+    assert!(matches!(bad_period, Err(LoopError::Core(CoreError::Setup(_)))));
     server.terminate();
     let gone = online.step(&[0.0, 0.0, ALONG_X, 1.0], &[], &mut planner).await.unwrap_err();
     assert!(matches!(gone, LoopError::Client(_)), "{gone}");
@@ -244,7 +238,7 @@ async fn a_step_whose_plan_failed_plans_again_next_time() {
     let obstacle = Obstacle::Circle { center: [5.0, 0.0], radius: 0.5 };
     planner.failures = planner.requests + 1;
     let failed = online.step(&tracker, std::slice::from_ref(&obstacle), &mut planner).await;
-    assert!(matches!(failed, Err(LoopError::Plan(_))), "{:?}", failed.map(|r| r.branch));
+    assert!(matches!(failed, Err(LoopError::Core(CoreError::Plan(_)))), "{:?}", failed.map(|r| r.branch));
     // ... and the next step, the obstacle no longer new, plans around it rather than follow the old path.
     let step = online.step(&tracker, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
     assert!(step.replanned, "{step:?}");

@@ -8,7 +8,6 @@ use fastrack_e2e::{robot_tick, TestServer};
 use fastrack_online::geometry::Obstacle;
 use fastrack_online::online_loop::{LoopSettings, OnlineLoop};
 use fastrack_online::raw_path::GridAStar;
-use fastrack_proto::planner_speed::SpeedRule;
 use std::collections::BTreeMap;
 use std::path::Path;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -199,14 +198,9 @@ async fn an_online_loop_keeps_its_bound_in_force_across_a_failover() {
     let address = servers.iter().map(|s| s.endpoint.as_str()).collect::<Vec<_>>().join(",");
     let options = ClientOptions { request_timeout: Duration::from_secs(10), ..ClientOptions::default() };
     let client = FastrackClient::connect(&address, options).await.unwrap();
-    let settings = LoopSettings {
-        model: model_ref("dubins4d", 0),
-        control_period: 0.1,
-        goal: [10.0, 0.0],
-        bounds: ([-2.0, -6.0], [12.0, 6.0]),
-        reset_candidates: 64,
-        rule: SpeedRule::HalfDistance,
-    };
+    let field = ([-2.0, -6.0], [12.0, 6.0]);
+    let settings =
+        LoopSettings { reset_candidates: 64, ..LoopSettings::new(model_ref("dubins4d", 0), 0.1, [10.0, 0.0], field) };
     let mut online = OnlineLoop::start(&client, settings, [0.0, 0.0]).await.unwrap();
     let mut planner = GridAStar::default();
     let tracker = [0.0, 0.0, std::f64::consts::FRAC_PI_2, 1.0];

@@ -108,6 +108,20 @@ pub struct TrainOptions<'a> {
     pub hamiltonian_sign: f64,
 }
 
+impl<'a> TrainOptions<'a> {
+    /// A fresh run in `run`, to the config's last iteration, quietly, with nothing to stop it early.
+    pub fn new(run: &'a RunDir) -> Self {
+        Self {
+            run,
+            resume: false,
+            max_iterations: None,
+            progress: false,
+            stop: Arc::new(AtomicBool::new(false)),
+            hamiltonian_sign: 1.0,
+        }
+    }
+}
+
 /// Trains (or continues) a run; returns the network and the final state.
 pub fn train(
     config: &TrainConfig,

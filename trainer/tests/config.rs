@@ -4,8 +4,6 @@
 use fastrack_trainer::config::TrainConfig;
 use fastrack_trainer::train::{train, RunDir, TrainOptions};
 use std::path::Path;
-use std::sync::atomic::AtomicBool;
-use std::sync::Arc;
 
 fn base_text() -> String {
     std::fs::read_to_string(Path::new(env!("CARGO_MANIFEST_DIR")).join("configs/experiments/double_integrator.toml"))
@@ -104,14 +102,7 @@ fn a_resumed_run_matches_an_uninterrupted_one() {
     config.checkpoint_every = 10;
     let device = burn::tensor::Device::flex().autodiff();
     fn options(run: &RunDir, resume: bool, max_iterations: Option<u64>) -> TrainOptions<'_> {
-        TrainOptions {
-            run,
-            resume,
-            max_iterations,
-            progress: false,
-            stop: Arc::new(AtomicBool::new(false)),
-            hamiltonian_sign: 1.0,
-        }
+        TrainOptions { resume, max_iterations, ..TrainOptions::new(run) }
     }
     let (a, b) = (tempfile::tempdir().unwrap(), tempfile::tempdir().unwrap());
     let (whole_run, split_run) = (RunDir(a.path().into()), RunDir(b.path().into()));

@@ -13,8 +13,6 @@ use fastrack_trainer::config::TrainConfig;
 use fastrack_trainer::train::{train, RunDir, TrainOptions};
 use fastrack_valuefn::system::double_integrator::closed_form_teb;
 use fastrack_valuefn::teb::{teb_table, AtHorizon, TebOptions};
-use std::sync::atomic::AtomicBool;
-use std::sync::Arc;
 
 /// Largest mean relative TEB error over the table's rows accepted from the committed recipe.
 const MEAN_TOLERANCE: f64 = 0.75;
@@ -27,14 +25,8 @@ fn mean_teb_error(sign: f64) -> Result<f64, String> {
     let config = TrainConfig::load(&path).unwrap();
     let system = config.system().unwrap();
     let run = tempfile::tempdir().unwrap();
-    let options = TrainOptions {
-        run: &RunDir(run.path().to_path_buf()),
-        resume: false,
-        max_iterations: None,
-        progress: false,
-        stop: Arc::new(AtomicBool::new(false)),
-        hamiltonian_sign: sign,
-    };
+    let run = RunDir(run.path().to_path_buf());
+    let options = TrainOptions { hamiltonian_sign: sign, ..TrainOptions::new(&run) };
     let (network, _) = train(&config, &Device::flex().autodiff(), options).expect("training runs");
     let oracle = AtHorizon { network: &network, tau: config.sampling.tau_max };
     let report = teb_table(&oracle, &system, &TebOptions::default())?;

@@ -20,8 +20,6 @@ use fastrack_valuefn::system::double_integrator::closed_form_teb;
 use fastrack_valuefn::system::AffineSystem;
 use fastrack_valuefn::teb::{teb_table, AtHorizon, TebOptions};
 use rand::{Rng, SeedableRng};
-use std::sync::atomic::AtomicBool;
-use std::sync::Arc;
 
 /// Largest relative TEB error accepted on any row (the target).
 const TOLERANCE: f64 = 0.10;
@@ -99,14 +97,8 @@ fn train_supervised(sign: f64) -> Outcome {
         eprintln!("grid beta {}: V_min {v_min:.4} (closed form {:.4})", spec.beta, closed_form_teb(spec.beta));
     }
 
-    let options = TrainOptions {
-        run: &RunDir(dir.path().join("run")),
-        resume: false,
-        max_iterations: None,
-        progress: false,
-        stop: Arc::new(AtomicBool::new(false)),
-        hamiltonian_sign: sign,
-    };
+    let run = RunDir(dir.path().join("run"));
+    let options = TrainOptions { hamiltonian_sign: sign, ..TrainOptions::new(&run) };
     let (network, _) = train(&config, &Device::flex().autodiff(), options).expect("training runs");
     let oracle = AtHorizon { network: &network, tau: config.sampling.tau_max };
     let report = teb_table(&oracle, &system, &TebOptions::default()).expect("a table");

@@ -337,6 +337,23 @@ pub struct Provenance {
     pub created: String,
 }
 
+impl Provenance {
+    /// The provenance of a network made without training, by `method` with `config`: no iterations, no
+    /// losses, and no machine, revision or time recorded.
+    pub fn untrained(method: impl Into<String>, config: serde_json::Value) -> Self {
+        Self {
+            method: method.into(),
+            config,
+            iterations: 0,
+            final_losses: BTreeMap::new(),
+            wall_time_s: 0.0,
+            machine: String::new(),
+            source_revision: String::new(),
+            created: String::new(),
+        }
+    }
+}
+
 /// Directions of [`TebRow::boundary_radii`] for an error space of `n_error` dimensions: `±1` in 1-D,
 /// `count` equally spaced angles from 0 (counter-clockwise) in 2-D, none otherwise.
 pub fn boundary_directions(n_error: usize, count: usize) -> Vec<Vec<f64>> {

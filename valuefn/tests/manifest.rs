@@ -41,16 +41,7 @@ fn manifest() -> Manifest {
             })
             .collect(),
         untrained: true,
-        provenance: Provenance {
-            method: "test".into(),
-            config: serde_json::Value::Null,
-            iterations: 0,
-            final_losses: Default::default(),
-            wall_time_s: 0.0,
-            machine: String::new(),
-            source_revision: String::new(),
-            created: String::new(),
-        },
+        provenance: Provenance::untrained("test", serde_json::Value::Null),
         onnx_sha256: "0".repeat(64),
     }
 }

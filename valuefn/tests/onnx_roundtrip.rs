@@ -65,14 +65,7 @@ fn check_network_roundtrip(system: &AffineSystem, network: &ValueNetwork, exact_
             continue;
         }
         let g = &out.grad[i * ns..(i + 1) * ns];
-        let scale = g.iter().map(|x| f64::from(*x).abs()).fold(0.0, f64::max).max(1e-2);
-        for j in 0..ns {
-            let (mut a, mut b) = (s.clone(), s.clone());
-            a[j] += h;
-            b[j] -= h;
-            let fd = (network.evaluate(tau, &a, &p).value - network.evaluate(tau, &b, &p).value) / (2.0 * h);
-            worst_grad = worst_grad.max((fd - f64::from(g[j])).abs() / scale);
-        }
+        worst_grad = worst_grad.max(gradient_error(g, &s, h, |x| network.evaluate(tau, x, &p).value));
     }
     assert!(worst_grad < 1e-3, "grad vs central differences: worst relative error {worst_grad:e}");
 
@@ -206,14 +199,7 @@ fn quad10d_composite_graph_matches_its_reference_finite_differences_and_the_axes
         }
         compared += 1;
         let g = &out.grad[i * ns..(i + 1) * ns];
-        let scale = g.iter().map(|x| f64::from(*x).abs()).fold(0.0, f64::max).max(1e-2);
-        for j in 0..ns {
-            let (mut a, mut b) = (s.clone(), s.clone());
-            a[j] += h;
-            b[j] -= h;
-            let fd = (composite.evaluate(&a, &p).value - composite.evaluate(&b, &p).value) / (2.0 * h);
-            worst_grad = worst_grad.max((fd - f64::from(g[j])).abs() / scale);
-        }
+        worst_grad = worst_grad.max(gradient_error(g, &s, h, |x| composite.evaluate(x, &p).value));
         // Where every axis' value is positive, the control is the system's law on the composite's grad.
         let grad: Vec<f64> = g.iter().map(|&x| x.into()).collect();
         let expected: Vec<f64> = system.optimal_control(&s, &grad).iter().map(|&u| f64::from(u as f32)).collect();
@@ -242,4 +228,18 @@ fn a_composite_takes_the_decomposition_s_axes_in_order_and_nothing_else() {
     assert!(error.to_string().contains("the network takes 4 state coordinates and 2 parameters"), "{error}");
     let error = Composite::new(dubins, random_axes(50)).unwrap_err();
     assert_eq!(error, CompositeError::NotDecomposed("dubins4d".into()));
+}
+
+/// The largest difference between the graph's gradient `g` at `s` and central differences of `value` (step
+/// `h`), relative to the gradient's largest component (at least 1e-2).
+fn gradient_error(g: &[f32], s: &[f64], h: f64, value: impl Fn(&[f64]) -> f64) -> f64 {
+    let scale = g.iter().map(|x| f64::from(*x).abs()).fold(0.0, f64::max).max(1e-2);
+    let mut worst = 0.0f64;
+    for (j, &gj) in g.iter().enumerate() {
+        let (mut a, mut b) = (s.to_vec(), s.to_vec());
+        a[j] += h;
+        b[j] -= h;
+        worst = worst.max(((value(&a) - value(&b)) / (2.0 * h) - f64::from(gj)).abs() / scale);
+    }
+    worst
 }

@@ -509,20 +509,6 @@ def test_speed_choice_agrees_with_query_planner_control(client: fastrack.Client)
 # --- closed loop -------------------------------------------------------------------------------------------------
 
 
-def dubins4d(s: Sequence[float], u: Sequence[float]) -> tuple[float, float, float, float]:
-    """The tracker: x' = v sin(theta), y' = v cos(theta), theta' = omega, v' = alpha (valuefn dubins4d)."""
-    return (s[3] * math.sin(s[2]), s[3] * math.cos(s[2]), u[0], u[1])
-
-
-def rk4(s: Sequence[float], u: Sequence[float], h: float) -> list[float]:
-    """One RK4 step of ``h`` seconds, the control held."""
-    k1 = dubins4d(s, u)
-    k2 = dubins4d([a + 0.5 * h * b for a, b in zip(s, k1)], u)
-    k3 = dubins4d([a + 0.5 * h * b for a, b in zip(s, k2)], u)
-    k4 = dubins4d([a + h * b for a, b in zip(s, k3)], u)
-    return [a + h / 6.0 * (b1 + 2.0 * b2 + 2.0 * b3 + b4) for a, b1, b2, b3, b4 in zip(s, k1, k2, k3, k4)]
-
-
 @dataclass
 class ClosedLoopRun:
     reached_at: float | None = None
@@ -548,6 +534,7 @@ def test_closed_loop_run_reaches_the_goal_safely(client: fastrack.Client) -> Non
     ]
     start, goal, dt, substeps, time_limit = (1.0, 5.0), (15.0, 5.0), 0.01, 4, 40.0
     s = [start[0], start[1], ALONG_X, 0.5]
+    rk4 = example().rk4  # the example's RK4 of the dubins4d tracker
     run = ClosedLoopRun()
     with OnlineLoop(
         client, MODEL, start=start, goal=goal, bounds=((0.0, 0.0), (16.0, 10.0)), control_period=dt

@@ -1,14 +1,14 @@
 //! `bench`: grid points updated per second (per core) for a 4-D dubins4d solve at WENO5 + RK3, beside
 //! hj_reachability on the same grid, system and scheme when a Python with it is given.
 
-use super::common::{command_line, params_for};
+use super::common::{params_for, write_command_record};
 use anyhow::{bail, Context};
 use fastrack_grid::grid::Grid;
 use fastrack_grid::integrate::{step, RkOrder, Workspace};
 use fastrack_grid::scheme::Flux;
 use fastrack_grid::solver::SolveFields;
 use fastrack_grid::upwind::Accuracy;
-use fastrack_lab::record::{write_record, MarkdownTable};
+use fastrack_lab::record::MarkdownTable;
 use fastrack_valuefn::system::dubins4d;
 use serde_json::{json, Value};
 use std::path::PathBuf;
@@ -135,8 +135,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let figures = json!({ "ours_point_updates_per_s": ours_rates, "ours_median": ours_rate,
         "ours_per_core": ours_rate / cores as f64, "hj_point_updates_per_s": hj_rates, "hj_median": hj_rate,
         "hj_per_core": hj_rate.map(|h| h / cores as f64), "ratio_ours_over_hj": ratio, "hj_run": hj_info });
-    let path =
-        write_record(&args.results_dir, &args.record, &command_line(), config, figures, &[("throughput", &table)])?;
+    let path = write_command_record(&args.results_dir, &args.record, config, figures, &[("throughput", &table)])?;
     println!("wrote {}", path.display());
     Ok(())
 }

@@ -9,6 +9,7 @@ use fastrack_grid::solver::{ConvergenceSet, SolverConfig};
 use fastrack_grid::spec::{AxisBounds, SolutionStore, SolveSpec, DEFAULT_STORE};
 use fastrack_grid::store::solve_or_load;
 use fastrack_grid::upwind::Accuracy;
+use fastrack_lab::record::{write_record, MarkdownTable};
 use fastrack_valuefn::system::{by_id, AffineSystem, DecomposedAxis, SYSTEM_IDS};
 use std::path::{Path, PathBuf};
 
@@ -153,6 +154,17 @@ pub fn params_for(system: &AffineSystem, beta: f64) -> anyhow::Result<Vec<f64>> 
 /// The command line as run, for records (`fastrack-grid <arguments>`, whatever the binary's path).
 pub fn command_line() -> String {
     std::iter::once("fastrack-grid".to_string()).chain(std::env::args().skip(1)).collect::<Vec<_>>().join(" ")
+}
+
+/// Writes a measurement record of this command ([`write_record`] with its command line as run).
+pub fn write_command_record(
+    dir: &Path,
+    name: &str,
+    config: serde_json::Value,
+    figures: serde_json::Value,
+    tables: &[(&str, &MarkdownTable)],
+) -> std::io::Result<PathBuf> {
+    write_record(dir, name, &command_line(), config, figures, tables)
 }
 
 /// Solution files with their paths.

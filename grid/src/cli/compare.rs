@@ -2,14 +2,14 @@
 //! decomposed system (quad10d) is compared along each of its axes with the combined ground truth of the
 //! axes' solutions (`--axis-solutions`).
 
-use super::common::{axes_at, command_line, load_axis_solutions, SolveOptions, StudyOutputs};
+use super::common::{axes_at, load_axis_solutions, write_command_record, SolveOptions, StudyOutputs};
 use anyhow::{bail, Context};
 use fastrack_grid::compare::{
     combined_on_axis, compare, learned_on_axis, learned_on_grid, slices, Comparison, Learned, Slices,
 };
 use fastrack_grid::slice_plot::slice_pair;
 use fastrack_grid::solver::Solution;
-use fastrack_lab::record::{write_record, MarkdownTable};
+use fastrack_lab::record::MarkdownTable;
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::manifest::Manifest;
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
@@ -148,10 +148,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     }
     let config = json!({ "bundle": args.bundle, "model": manifest.name, "version": manifest.version,
         "untrained": manifest.untrained, "betas": args.betas, "sublevel_factor": args.sublevel_factor, "solver": solve.config() });
-    let path = write_record(
+    let path = write_command_record(
         &args.outputs.results_dir,
         &name,
-        &command_line(),
         config,
         json!({ "rows": rows }),
         &[("learned vs grid", &table)],
@@ -199,10 +198,9 @@ fn run_axes(
     let config = json!({ "bundle": args.bundle, "model": manifest.name, "version": manifest.version,
         "untrained": manifest.untrained, "axis_solutions": args.axis_solutions,
         "sublevel_factor": args.sublevel_factor });
-    let path = write_record(
+    let path = write_command_record(
         &args.outputs.results_dir,
         name,
-        &command_line(),
         config,
         json!({ "rows": rows }),
         &[("learned vs the combined ground truth, along each axis", &table)],

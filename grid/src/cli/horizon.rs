@@ -3,11 +3,11 @@
 //! the sublevel-set rate first falls below a tolerance (over the solve's rate windows when it has them, else per
 //! step); plots and a measurement record.
 
-use super::common::{command_line, SolveOptions, StudyOutputs};
+use super::common::{write_command_record, SolveOptions, StudyOutputs};
 use fastrack_grid::analysis::{teb, EXTENT_REL_TOL};
 use fastrack_grid::solver::{ConvergenceSet, HistoryPoint, Solution, WindowRates};
 use fastrack_lab::plot::{line_chart, Chart, Series};
-use fastrack_lab::record::{write_record, MarkdownTable};
+use fastrack_lab::record::MarkdownTable;
 use serde_json::json;
 
 /// Arguments of `horizon`.
@@ -278,10 +278,9 @@ fn write_outputs(args: &Args, set: ConvergenceSet, studies: &[Study], name: &str
         "tolerance_per_beta": args.tolerance_per_beta,
         "report_settle_time": args.report_settle_time, "vmin_window": args.vmin_window, "bounds": args.solve.bounds,
     });
-    let path = write_record(
+    let path = write_command_record(
         dir,
         name,
-        &command_line(),
         config,
         figures,
         &[

@@ -1,6 +1,6 @@
 //! `reshape`: a bundle's error-set shapes measured again at each row's set level.
 
-use super::verify::{load, Loaded};
+use super::verify::{BundleSource, Loaded};
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::teb::{reshape_at_set_levels, TebOptions};
 use std::path::PathBuf;
@@ -8,22 +8,18 @@ use std::path::PathBuf;
 /// Arguments of `reshape`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// The bundle's version folder, e.g. `models/dubins4d/4`.
-    #[arg(long)]
-    bundle: PathBuf,
+    #[command(flatten)]
+    source: BundleSource,
     /// Repository root the reshaped bundle is written into (`<out>/<name>/<version>/`; the bundle's own
     /// repository rewrites it in place).
     #[arg(long)]
     out: PathBuf,
-    /// ONNX Runtime library (default: FASTRACK_ORT_LIB, then .cache/onnxruntime).
-    #[arg(long)]
-    ort_lib: Option<PathBuf>,
 }
 
 /// Runs `reshape`: every row's extent, boundary radii and nested share measured again at its set level, as
 /// verification leaves them, for a bundle whose shapes were measured at another level.
 pub fn run(args: Args) -> anyhow::Result<()> {
-    let Loaded { bundle, system, evaluator } = load(&args.bundle, args.ort_lib.as_deref())?;
+    let Loaded { bundle, system, evaluator } = args.source.load()?;
     let mut manifest = bundle.manifest.clone();
     reshape_at_set_levels(&evaluator, &system, &mut manifest.teb_table, &TebOptions::default())
         .map_err(anyhow::Error::msg)?;

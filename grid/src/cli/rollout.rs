@@ -2,13 +2,13 @@
 //! solution's `V_min`; a table, a plot against `beta` and a record. With `--system` naming a decomposed
 //! system, the solutions are its axes' and are rolled out side by side in the full system, per `beta`.
 
-use super::common::{axes_at, command_line, load_axis_solutions};
+use super::common::{axes_at, load_axis_solutions, write_command_record};
 use anyhow::Context;
 use fastrack_grid::format::load;
 use fastrack_grid::rollout::{roll_out_axes, roll_out_solution, AxesRolloutReport, RolloutOptions, RolloutReport};
 use fastrack_grid::solver::Solution;
 use fastrack_lab::plot::{line_chart, Chart, Series};
-use fastrack_lab::record::{write_record, MarkdownTable};
+use fastrack_lab::record::MarkdownTable;
 use fastrack_valuefn::system::{by_id, decomposition};
 use serde_json::json;
 use std::path::PathBuf;
@@ -180,10 +180,9 @@ fn write_outputs(
         }).collect::<Vec<_>>(),
         "plot": png,
     });
-    let path = write_record(
+    let path = write_command_record(
         &args.results_dir,
         name,
-        &command_line(),
         json!({ "rollout": options }),
         figures,
         &[("sustained error against each solution's policy", &table)],
@@ -246,10 +245,9 @@ fn run_axes(args: &Args, options: &RolloutOptions, id: &str) -> anyhow::Result<(
             "solutions": solutions.iter().map(|(path, s)| solution_figure(path, s)).collect::<Vec<_>>(),
             "reports": reports,
         });
-        let path = write_record(
+        let path = write_command_record(
             &args.results_dir,
             name,
-            &command_line(),
             json!({ "rollout": options }),
             figures,
             &[("the axes' policies side by side in the full system", &table)],

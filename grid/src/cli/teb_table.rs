@@ -1,12 +1,12 @@
 //! `teb-table`: the grid's TEB table over `beta` (the classic FaSTrack bound at `beta_l`/`beta_u` and the Meta-FaSTrack levels),
 //! across resolutions and accuracies, with convergence plots and a measurement record.
 
-use super::common::{command_line, SolveOptions, StudyOutputs};
+use super::common::{write_command_record, SolveOptions, StudyOutputs};
 use fastrack_grid::analysis::{teb, Teb, EXTENT_REL_TOL};
 use fastrack_grid::solver::Solution;
 use fastrack_grid::upwind::Accuracy;
 use fastrack_lab::plot::{line_chart, Chart, Series};
-use fastrack_lab::record::{write_record, MarkdownTable};
+use fastrack_lab::record::MarkdownTable;
 use fastrack_valuefn::system::AffineSystem;
 use serde_json::json;
 
@@ -206,10 +206,9 @@ fn write_outputs(
         "system": system.id, "betas": betas, "accuracies": accuracies, "resolutions": args.resolutions,
         "solver": args.solve.config(), "bounds": args.solve.bounds, "extent_rel_tol": EXTENT_REL_TOL,
     });
-    let path = write_record(
+    let path = write_command_record(
         dir,
         name,
-        &command_line(),
         config,
         figures,
         &[("TEB table (finest grid)", &teb_table), ("every solve", &all)],

@@ -1,7 +1,7 @@
 //! `verify`: scenario verification of a bundle's TEB table, written back into a copy of the bundle; with
 //! `--shard`, one shard's rows written as a part, which `verify-merge` combines into what a single run writes.
 
-use super::common::command_line;
+use super::common::write_command_record;
 use anyhow::Context;
 use fastrack_grid::format;
 use fastrack_grid::solver::Solution;
@@ -9,7 +9,7 @@ use fastrack_grid::verify::{
     apply_reports, combine_pieces, required_samples, verify_rows, Batching, ControlLaw, Correction,
     FalsificationOptions, RecordedStates, RowReport, SearchOptions, Selection, VerifyOptions,
 };
-use fastrack_lab::record::{write_record, MarkdownTable};
+use fastrack_lab::record::MarkdownTable;
 use fastrack_lab::shard::{Part, Shard};
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::manifest::{Manifest, TebRow};
@@ -26,9 +26,8 @@ pub(super) const PART_STEM: &str = "grid-verify";
 /// Arguments of `verify`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// The bundle's version folder, e.g. `models/dubins4d/4`.
-    #[arg(long)]
-    bundle: PathBuf,
+    #[command(flatten)]
+    source: BundleSource,
     /// Repository root the verified bundle is written into (`<out>/<name>/<version>/`); may be the
     /// bundle's own repository to update it in place. Not with `--control-law grid`, which writes only a record.
     #[arg(long, required_unless_present_any = ["part_dir", "control_law"])]
@@ -149,15 +148,8 @@ pub struct Args {
     /// Random seed.
     #[arg(long, default_value_t = 11)]
     seed: u64,
-    /// ONNX Runtime library (default: FASTRACK_ORT_LIB, then .cache/onnxruntime).
-    #[arg(long)]
-    ort_lib: Option<PathBuf>,
-    /// Record name (default `grid-verify-<model>`).
-    #[arg(long)]
-    record: Option<String>,
-    /// Folder of measurement records.
-    #[arg(long, default_value = "bench/results")]
-    results_dir: PathBuf,
+    #[command(flatten)]
+    recording: Recording,
     /// Only this shard of the rows, `INDEX/COUNT` (the `i`-th row verified goes to shard `i % COUNT`), or
     /// `COUNT` with the index from `JOB_COMPLETION_INDEX` (a Kubernetes Indexed Job); writes a part
     /// (--part-dir) for `verify-merge` instead of a bundle and a record.
@@ -168,22 +160,55 @@ pub struct Args {
     part_dir: Option<PathBuf>,
 }
 
+/// The bundle a command reads, and the ONNX Runtime that evaluates it.
+#[derive(clap::Args)]
+pub(super) struct BundleSource {
+    /// The bundle's version folder, e.g. `models/dubins4d/4`.
+    #[arg(long)]
+    pub(super) bundle: PathBuf,
+    /// ONNX Runtime library (default: FASTRACK_ORT_LIB, then .cache/onnxruntime).
+    #[arg(long)]
+    ort_lib: Option<PathBuf>,
+}
+
+impl BundleSource {
+    /// The bundle, its system and an evaluator of its network (one session per worker thread).
+    pub(super) fn load(&self) -> anyhow::Result<Loaded> {
+        let bundle = Bundle::load(&self.bundle)?;
+        let manifest = &bundle.manifest;
+        let system = for_bundle(&manifest.system.id, manifest.n_params()).with_context(|| {
+            format!("the bundle's system `{}` with {} parameters is unknown", manifest.system.id, manifest.n_params())
+        })?;
+        let sessions = rayon::current_num_threads();
+        let evaluator =
+            Evaluator::new(runtime(self.ort_lib.as_deref())?, &bundle.onnx, GraphDims::of(manifest), sessions)?;
+        Ok(Loaded { bundle, system, evaluator })
+    }
+}
+
+/// Where a verification's record goes.
+#[derive(clap::Args)]
+pub(super) struct Recording {
+    /// Record name (default `grid-verify-<model>`).
+    #[arg(long)]
+    record: Option<String>,
+    /// Folder of measurement records.
+    #[arg(long, default_value = "bench/results")]
+    results_dir: PathBuf,
+}
+
+impl Recording {
+    /// The outputs of a verification writing its bundle into `out` (none: a record only).
+    pub(super) fn outputs<'a>(&'a self, out: Option<&'a Path>) -> Outputs<'a> {
+        Outputs { out, record: self.record.as_deref(), results_dir: &self.results_dir }
+    }
+}
+
 /// A bundle with what verifying it needs.
 pub(super) struct Loaded {
     pub(super) bundle: Bundle,
     pub(super) system: AffineSystem,
     pub(super) evaluator: Evaluator,
-}
-
-pub(super) fn load(path: &Path, ort_lib: Option<&Path>) -> anyhow::Result<Loaded> {
-    let bundle = Bundle::load(path)?;
-    let manifest = &bundle.manifest;
-    let system = for_bundle(&manifest.system.id, manifest.n_params()).with_context(|| {
-        format!("the bundle's system `{}` with {} parameters is unknown", manifest.system.id, manifest.n_params())
-    })?;
-    let sessions = rayon::current_num_threads();
-    let evaluator = Evaluator::new(runtime(ort_lib)?, &bundle.onnx, GraphDims::of(manifest), sessions)?;
-    Ok(Loaded { bundle, system, evaluator })
 }
 
 /// Runs `verify`.
@@ -202,7 +227,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         control_law == ControlLaw::Grid || args.out.is_some() || args.part_dir.is_some(),
         "give --out, the repository the verified bundle is written into"
     );
-    let Loaded { bundle, system, evaluator } = load(&args.bundle, args.ort_lib.as_deref())?;
+    let Loaded { bundle, system, evaluator } = args.source.load()?;
     let options = VerifyOptions {
         eps: args.eps,
         level_margin: args.level_margin,
@@ -270,7 +295,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     };
     let reports = verify_rows(&evaluator, &bundle.manifest, &system, &selection, shard, &options, &bar)?;
     bar.finish_and_clear();
-    let config = json!({ "bundle": args.bundle, "model": bundle.manifest.name, "version": bundle.manifest.version,
+    let config = json!({ "bundle": args.source.bundle, "model": bundle.manifest.name, "version": bundle.manifest.version,
         "onnx_sha256": bundle.manifest.onnx_sha256, "untrained": bundle.manifest.untrained, "options": options,
         "betas": args.betas, "grid_solutions": args.grid_solutions, "grid_tolerance": args.grid_tolerance,
         "operational_states": args.operational_states,
@@ -283,7 +308,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         return Ok(());
     }
     let reports = combine_pieces(reports)?;
-    let out = Outputs { out: args.out.as_deref(), record: args.record.as_deref(), results_dir: &args.results_dir };
+    let out = args.recording.outputs(args.out.as_deref());
     finish(&evaluator, bundle, &system, reports, config, &out)
 }
 
@@ -376,10 +401,9 @@ pub(super) fn finish(
     let broken = reports.iter().filter(|r| r.verification.violations > 0).count();
     println!("{broken} of {} rows had violations", reports.len());
     let name = outputs.record.map_or_else(|| format!("grid-verify-{}", manifest.name), str::to_string);
-    let path = write_record(
+    let path = write_command_record(
         outputs.results_dir,
         &name,
-        &command_line(),
         config,
         json!({ "rows": reports, "rows_with_violations": broken, "wall_s": wall }),
         &[("verification", &table)],

@@ -2,10 +2,10 @@
 //! call, all states in one call on one thread (how verification ran before batching), and in chunks on every
 //! core; with the wall time of a row and a table at given settings projected from the fastest rate.
 
-use super::common::command_line;
+use super::common::write_command_record;
 use anyhow::Context;
 use fastrack_grid::verify::{required_samples, rollout_rate, Batching, RateProbe};
-use fastrack_lab::record::{write_record, MarkdownTable};
+use fastrack_lab::record::MarkdownTable;
 use fastrack_valuefn::bundle::Bundle;
 use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
 use fastrack_valuefn::system::for_bundle;
@@ -124,10 +124,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let results = json!({ "rates": rates.iter().map(|(name, states, b, rate)| json!({ "feeding": name,
         "rollouts": states, "chunk": b.chunk.min(*states), "parallel": b.parallel, "rollout_steps_per_s": rate }))
         .collect::<Vec<_>>(), "row_rollout_steps": row_steps, "rows": rows });
-    let path = write_record(
+    let path = write_command_record(
         &args.results_dir,
         &args.record,
-        &command_line(),
         config,
         results,
         &[("rollout steps per second", &table), ("projected wall time without search or extra rounds", &projection)],

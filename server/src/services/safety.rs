@@ -124,6 +124,12 @@ struct BatchRequest {
     policy: pb::OutOfDomainPolicy,
 }
 
+impl BatchRequest {
+    fn new(policy: pb::OutOfDomainPolicy, model: Option<pb::ModelRef>, states: Vec<f64>, params: Vec<f64>) -> Self {
+        Self { model, states, params, policy }
+    }
+}
+
 fn widen(v: &[f32]) -> Vec<f64> {
     v.iter().map(|&x| f64::from(x)).collect()
 }
@@ -164,12 +170,7 @@ impl SafetyService for Safety {
         &self,
         request: Request<pb::EvaluateValueRequest>,
     ) -> Result<Response<pb::EvaluateValueResponse>, Status> {
-        let request = request.map(|r| BatchRequest {
-            policy: r.out_of_domain(),
-            model: r.model,
-            states: r.states,
-            params: r.params,
-        });
+        let request = request.map(|r| BatchRequest::new(r.out_of_domain(), r.model, r.states, r.params));
         self.evaluate("EvaluateValue", request, |model_version, result, batch| pb::EvaluateValueResponse {
             values: widen(&result.outputs.value),
             gradients: widen(&result.outputs.grad),
@@ -185,12 +186,7 @@ impl SafetyService for Safety {
         &self,
         request: Request<pb::TrackingControlRequest>,
     ) -> Result<Response<pb::TrackingControlResponse>, Status> {
-        let request = request.map(|r| BatchRequest {
-            policy: r.out_of_domain(),
-            model: r.model,
-            states: r.states,
-            params: r.params,
-        });
+        let request = request.map(|r| BatchRequest::new(r.out_of_domain(), r.model, r.states, r.params));
         self.evaluate("TrackingControl", request, |model_version, result, batch| pb::TrackingControlResponse {
             controls: widen(&result.outputs.control),
             values: widen(&result.outputs.value),

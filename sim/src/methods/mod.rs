@@ -9,7 +9,7 @@ mod timed_planner;
 
 pub use levels::LevelPlanner;
 pub use mppi::{Mppi, MppiSettings};
-pub use parametric::{Parametric, RESET_CANDIDATES};
+pub use parametric::Parametric;
 pub use timed_planner::TimedPlanner;
 
 use crate::backend::Backend;

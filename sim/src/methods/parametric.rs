@@ -6,15 +6,12 @@ use super::{Context, Decision, MethodError, TimedPlanner};
 use crate::backend::BackendOracle;
 use crate::trace::{LoopTrace, TraceStep, FORMAT};
 use crate::visits::Visit;
-use fastrack_online::core::CoreSettings;
+use fastrack_online::core::{CoreSettings, DEFAULT_RESET_CANDIDATES};
 use fastrack_online::fastest_path::FastestPath;
 use fastrack_online::geometry::{Obstacle, Point};
 use fastrack_online::online_loop::{Branch, OnlineLoop};
 use fastrack_online::raw_path::{GridAStar, RawPathPlanner};
 use fastrack_proto::planner_speed::SpeedRule;
-
-/// Reset candidates a reset asks about before the planner holds.
-pub const RESET_CANDIDATES: usize = 256;
 
 /// Parametric FaSTrack, running.
 pub struct Parametric {
@@ -39,7 +36,7 @@ impl Parametric {
             control_period: context.control_period,
             goal: context.world.goal,
             bounds: context.world.bounds(),
-            reset_candidates: RESET_CANDIDATES,
+            reset_candidates: DEFAULT_RESET_CANDIDATES,
             rule,
         };
         settings.check().map_err(|e| MethodError::Setup(e.to_string()))?;

@@ -48,12 +48,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     ctrlc::set_handler(move || flag.store(true, Ordering::Relaxed)).context("installing the Ctrl-C handler")?;
     let run = RunDir(args.run_dir);
     let options = TrainOptions {
-        run: &run,
         resume: args.resume,
         max_iterations: args.max_iterations,
         progress: true,
         stop: Arc::clone(&stop),
-        hamiltonian_sign: 1.0,
+        ..TrainOptions::new(&run)
     };
     let (_, state) = train(&config, &device, options)?;
     let figure = fastrack_trainer::report::plot_losses(&run)?;
