@@ -140,7 +140,7 @@ pub fn combined_on_axis(system: &AffineSystem, axes: &[(DecomposedAxis, &Solutio
             base[i] = x;
         }
         if b != k {
-            let v_min = solution.values.iter().copied().fold(f64::INFINITY, f64::min);
+            let v_min = solution.v_min();
             others += v_min.max(0.0).powi(2);
         }
     }
@@ -171,7 +171,7 @@ pub fn learned_on_axis(evaluator: &Evaluator, slice: &AxisSlice, params: &[f64])
 
 /// Compares `learned` (at the grid's nodes) with `solution` of `system` over `{V_grid <= factor V_min}`.
 pub fn compare(system: &AffineSystem, solution: &Solution, learned: &Learned, sublevel_factor: f64) -> Comparison {
-    let grid_v_min = solution.values.iter().copied().fold(f64::INFINITY, f64::min);
+    let grid_v_min = solution.v_min();
     let learned_v_min = learned.values.iter().copied().fold(f64::INFINITY, f64::min);
     let set_level = sublevel_factor * grid_v_min;
     let (n_state, n_control) = (system.n_state(), system.n_control());

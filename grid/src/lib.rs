@@ -8,7 +8,8 @@
 //! (TVD Runge-Kutta), [`solver`] (the tracking value iteration to convergence). Around it: [`store`]
 //! (solutions by spec, solved when missing), [`analysis`] (TEB of a solution), [`compare`] (a model bundle
 //! against grid solutions), [`verify`] (scenario verification of a bundle's TEB table), [`rollout`] (what
-//! planners force against a grid solution's own policy), [`slice_plot`] (PNG figures).
+//! planners force against a grid solution's own policy), [`reference`] (ground-truth bounds for a bundle's
+//! rows), [`slice_plot`] (PNG figures).
 
 #![warn(missing_docs)]
 
@@ -16,6 +17,7 @@ pub mod analysis;
 pub mod compare;
 pub mod hamiltonian;
 pub mod integrate;
+pub mod reference;
 pub mod rollout;
 pub mod scheme;
 pub mod slice_plot;

@@ -260,7 +260,7 @@ fn largest_sustained(results: &[(bool, Reached)], worst_case: bool) -> Option<f6
 
 /// The nodes of `{V <= (1 + margin) V_min}` of `solution`, thinned evenly to at most `max` points, and `V_min`.
 fn sublevel_nodes(solution: &Solution, margin: f64, max: usize) -> (Vec<Vec<f64>>, f64) {
-    let v_min = solution.values.iter().copied().fold(f64::INFINITY, f64::min);
+    let v_min = solution.v_min();
     let level = v_min + margin * v_min.abs();
     let nodes: Vec<usize> = (0..solution.values.len()).filter(|&f| solution.values[f] <= level).collect();
     let stride = nodes.len().div_ceil(max).max(1);

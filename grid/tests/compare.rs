@@ -57,7 +57,7 @@ fn the_control_figures_are_nil_for_the_grids_control_and_the_vertex_gap_for_a_fl
     let (mut best, mut flipped) = (Vec::new(), Vec::new());
     // On the set {V <= 3 V_min}: the control mirrored within its range, lo + hi - u*, loses
     // sum_j |s_j| (hi_j - lo_j) (s = G_u^T p), and equals u* only where u* is the midpoint (s_j = 0).
-    let v_min = solution.values.iter().copied().fold(f64::INFINITY, f64::min);
+    let v_min = solution.v_min();
     let (mut expected_loss, mut set_nodes, mut ties) = (0.0, 0usize, [0usize; 2]);
     for flat in 0..grid.num_points() {
         grid.point(flat, &mut r);

@@ -38,7 +38,7 @@ fn grid(half_x: f64, half_v: f64, n_x: usize, n_v: usize) -> Grid {
 /// `V_min / closed form` and whether the solve converged.
 fn ratio(beta: f64, grid: &Grid, config: &SolverConfig) -> (f64, bool) {
     let solution = solve(&system(), &[beta], grid, config, false).unwrap();
-    let v_min = solution.values.iter().copied().fold(f64::INFINITY, f64::min);
+    let v_min = solution.v_min();
     (v_min / closed_form_teb(beta), solution.info.converged)
 }
 

@@ -34,7 +34,7 @@ fn z_axis_v_min_within_3_percent_of_closed_form_and_error_shrinks_under_refineme
     let mut errors = Vec::new();
     for (n_z, n_v) in [(201, 101), (241, 121)] {
         let solution = solve(&system, &[beta], &grid(beta, n_z, n_v), &config, false).unwrap();
-        let v_min = solution.values.iter().copied().fold(f64::INFINITY, f64::min);
+        let v_min = solution.v_min();
         let ratio = v_min / z_axis_closed_form_teb(beta);
         eprintln!("beta {beta}, {n_z}x{n_v}: V_min / closed form = {ratio:.4}, converged {}", solution.info.converged);
         assert!(solution.info.converged, "{n_z}x{n_v}: not converged by the horizon cap");

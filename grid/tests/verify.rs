@@ -140,6 +140,7 @@ fn write_bundle(
                 boundary_radii: vec![],
                 verification: None,
                 nested_share: None,
+                reference: None,
             }
         })
         .collect();

@@ -110,6 +110,11 @@ pub struct Solution {
 }
 
 impl Solution {
+    /// `V_min`: the smallest value over the grid.
+    pub fn v_min(&self) -> f64 {
+        self.values.iter().copied().fold(f64::INFINITY, f64::min)
+    }
+
     /// `dV/dr` of the interpolant at `r` by central differences across one cell, into `out`.
     pub fn gradient(&self, r: &[f64], out: &mut [f64]) {
         let mut shifted = r.to_vec();

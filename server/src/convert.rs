@@ -58,6 +58,9 @@ pub fn model_info(m: &Manifest, space: &StateSpace) -> pb::ModelInfo {
                 extent: row.extent.clone(),
                 verification: row.verification.as_ref().map(verification),
                 nested_share: row.nested_share,
+                reference_bound: row.reference.as_ref().map(|r| r.bound),
+                reference_source: row.reference.as_ref().map_or_else(String::new, |r| r.source.clone()),
+                bound_source: row.bound_source().name().into(),
             })
             .collect(),
         untrained: m.untrained,

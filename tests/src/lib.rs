@@ -50,6 +50,7 @@ pub fn hand_made_table(system: &AffineSystem) -> Vec<TebRow> {
                 // Radii per direction of `boundary_directions`: 2 for 1-D error sets, 16 for 2-D, none above.
                 boundary_radii: vec![0.8 * level; [0, 2, 16].get(system.error_coords.len()).copied().unwrap_or(0)],
                 nested_share: None,
+                reference: None,
                 verification: None,
             }
         })

@@ -90,11 +90,36 @@ async fn compare_and_verify_read_a_diagonal_bundle() {
     );
     assert!(!partial.exists(), "no bundle written");
 
-    // GetModel serves every figure of each row's verification, as the manifest holds it.
+    // `reference` writes the grid's ground truth into the rows at or below the solved beta 0.8 (the next
+    // solved beta above theirs), none above; the bound never lies below it.
+    let solution = std::fs::read_dir(&solutions)
+        .unwrap()
+        .map(|entry| entry.unwrap().path())
+        .find(|p| p.extension().is_some_and(|e| e == "ftgrid"))
+        .expect("compare's solution in the store");
+    let verified_dir = verified.join("tiny-d4").join("1");
+    let reference = ["reference", "--bundle", path(&verified_dir), "--grid-solutions", path(&solution)];
+    run("fastrack-grid", &[&reference[..], &["--out", path(&verified)]].concat());
+    let manifest = Bundle::load(&verified_dir).unwrap().manifest;
+    assert!(manifest.teb_table.iter().all(|row| row.verification.is_some()), "the verifications are kept");
+    for row in &manifest.teb_table {
+        match &row.reference {
+            Some(r) => {
+                assert!(row.beta <= 0.8 && r.source.contains("grid at beta 0.8"), "beta {}: {r:?}", row.beta);
+                assert_eq!(row.bound(), row.verified_bound().max(r.bound));
+            }
+            None => assert!(row.beta > 0.8, "beta {} has no reference", row.beta),
+        }
+    }
+
+    // GetModel serves every figure of each row's verification and reference, as the manifest holds it.
     let (_server, client) = TestServer::start_serving(&verified).await;
     let info = client.get_model(model_ref("tiny-d4", 1)).await.unwrap();
     assert_eq!(info.teb_table.len(), manifest.teb_table.len());
     for (served, row) in info.teb_table.iter().zip(&manifest.teb_table) {
+        assert_eq!(served.reference_bound, row.reference.as_ref().map(|r| r.bound));
+        assert_eq!(served.reference_source, row.reference.as_ref().map_or("", |r| r.source.as_str()));
+        assert_eq!((served.bound, served.bound_source.as_str()), (row.bound(), row.bound_source().name()));
         let (got, want) =
             (served.verification.as_ref().expect("a verification per row"), row.verification.as_ref().unwrap());
         assert_eq!(served.verified_level, Some(want.verified_level));

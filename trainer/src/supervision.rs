@@ -136,7 +136,7 @@ impl GridSupervision {
                 let mismatch = |problem: String| SupervisionError::Mismatch { path: path.clone(), problem };
                 check_fits(&solution, system, tau_max).map_err(mismatch)?;
                 let params = network_params(&solution.info.params, system).map_err(mismatch)?;
-                let v_min = solution.values.iter().copied().fold(f64::INFINITY, f64::min);
+                let v_min = solution.v_min();
                 let near_minimum =
                     (0..solution.values.len()).filter(|&i| solution.values[i] <= config.focus_factor * v_min).collect();
                 Ok((path, Supervised { solution, params, near_minimum }))

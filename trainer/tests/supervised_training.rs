@@ -93,7 +93,7 @@ fn train_supervised(sign: f64) -> Outcome {
     let store = SolutionStore::new(&supervision.store);
     for spec in supervision.solutions.specs() {
         let (solution, _) = solve_or_load(&store, &spec, false).unwrap();
-        let v_min = solution.values.iter().copied().fold(f64::INFINITY, f64::min);
+        let v_min = solution.v_min();
         eprintln!("grid beta {}: V_min {v_min:.4} (closed form {:.4})", spec.beta, closed_form_teb(spec.beta));
     }
 

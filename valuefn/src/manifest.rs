@@ -207,6 +207,44 @@ pub struct TebRow {
     /// measured, and where the set was too small to sample.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub nested_share: Option<f64>,
+    /// The ground-truth bound at this row's `beta`, where the project has one: the served bound never lies
+    /// below it.
+    #[serde(default, skip_serializing_if = "Option::is_none")]
+    pub reference: Option<Reference>,
+}
+
+/// A ground-truth bound for one row: a grid solution's `V_min`, a closed form, or their combination over a
+/// decomposed system's axes, at the row's `beta` or the next solved `beta` above it (`V_min` grows with
+/// `beta`, so that one is no smaller).
+#[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
+#[serde(deny_unknown_fields)]
+pub struct Reference {
+    /// The bound, a distance in the error coordinates.
+    pub bound: f64,
+    /// Where it comes from, e.g. `grid quad10d_x beta 1.1 (x, y); closed form beta^2 / a_up (z)`.
+    pub source: String,
+}
+
+/// Which number set a row's [`bound`](TebRow::bound).
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum BoundSource {
+    /// The learned level: the row is unverified.
+    Learned,
+    /// Verification: the largest error it reached, or the certified set's own level.
+    Verification,
+    /// The ground-truth reference, which lies above what verification reached.
+    Reference,
+}
+
+impl BoundSource {
+    /// The name the contract uses: `learned`, `verification` or `reference`.
+    pub fn name(self) -> &'static str {
+        match self {
+            BoundSource::Learned => "learned",
+            BoundSource::Verification => "verification",
+            BoundSource::Reference => "reference",
+        }
+    }
 }
 
 impl TebRow {
@@ -226,9 +264,24 @@ impl TebRow {
     /// `level` where the row is unverified. It is the number the speed rule compares with `d_obs / 2`, and it
     /// holds for relative states inside the set of [`set_level`](Self::set_level). With the `set` correction
     /// it equals the set level unless the verification's slack let the error pass it.
+    /// Where the row has a ground-truth [`reference`](Self::reference) above that, the reference.
     pub fn bound(&self) -> f64 {
+        self.verified_bound().max(self.reference.as_ref().map_or(0.0, |r| r.bound))
+    }
+
+    /// The bound verification alone gives (the learned level for an unverified row), before the reference.
+    pub fn verified_bound(&self) -> f64 {
         let verified = self.verification.as_ref().map_or(0.0, |v| v.verified_level);
         self.level.max(self.set_level()).max(verified)
+    }
+
+    /// Which number set [`bound`](Self::bound).
+    pub fn bound_source(&self) -> BoundSource {
+        match (&self.reference, &self.verification) {
+            (Some(reference), _) if reference.bound > self.verified_bound() => BoundSource::Reference,
+            (_, Some(_)) => BoundSource::Verification,
+            (_, None) => BoundSource::Learned,
+        }
     }
 }
 
@@ -595,6 +648,14 @@ impl Manifest {
                 }
                 if v.sampled_level.is_some_and(|l| !(l.is_finite() && l > 0.0)) {
                     return fail(field, "verification.sampled_level must be finite and > 0");
+                }
+            }
+            if let Some(r) = &row.reference {
+                if !(r.bound.is_finite() && r.bound > 0.0) {
+                    return fail(field, format!("reference.bound must be finite and > 0, got {}", r.bound));
+                }
+                if r.source.trim().is_empty() {
+                    return fail(field, "reference.source must say where the reference comes from");
                 }
             }
         }

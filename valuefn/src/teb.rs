@@ -306,7 +306,16 @@ pub fn teb_table(oracle: &dyn ValueOracle, system: &AffineSystem, options: &TebO
         running_max = running_max.max(measured_min);
         let level = running_max;
         let (extent, boundary_radii) = error_set_shape(oracle, system, &params, level, options, &mut rng)?;
-        rows.push(TebRow { beta, level, measured_min, extent, boundary_radii, verification: None, nested_share: None });
+        rows.push(TebRow {
+            beta,
+            level,
+            measured_min,
+            extent,
+            boundary_radii,
+            verification: None,
+            nested_share: None,
+            reference: None,
+        });
     }
     Ok(TebReport { rows, non_monotone })
 }

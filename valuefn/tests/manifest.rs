@@ -2,8 +2,8 @@
 
 use fastrack_valuefn::bundle::{scan_repository, Bundle, BundleError, MAX_MANIFEST_BYTES};
 use fastrack_valuefn::manifest::{
-    AxisNetworkInfo, Manifest, NetworkInfo, Provenance, SystemInfo, TebRow, Verification, COMPOSITE_KIND,
-    SCHEMA_VERSION,
+    AxisNetworkInfo, BoundSource, Manifest, NetworkInfo, Provenance, Reference, SystemInfo, TebRow, Verification,
+    COMPOSITE_KIND, SCHEMA_VERSION,
 };
 use fastrack_valuefn::network::PeriodicEncoding;
 use fastrack_valuefn::system::dubins4d;
@@ -37,6 +37,7 @@ fn manifest() -> Manifest {
                 extent: vec![0.1, 0.1],
                 boundary_radii: vec![0.1; 8],
                 nested_share: None,
+                reference: None,
                 verification: None,
             })
             .collect(),
@@ -225,6 +226,7 @@ fn a_row_serves_the_set_it_certified_and_the_bound_from_inside_it() {
         extent: vec![0.6, 0.6],
         boundary_radii: Vec::new(),
         nested_share: None,
+        reference: None,
         verification: None,
     };
     // Unverified: the learned level for both.
@@ -242,4 +244,31 @@ fn a_row_serves_the_set_it_certified_and_the_bound_from_inside_it() {
     // Never below the learned level.
     let low = verified(&row, 0.3, 0.3, "set");
     assert_eq!((low.set_level(), low.bound()), (0.3, 0.5876));
+    assert_eq!([row.bound_source(), by_bound.bound_source()], [BoundSource::Learned, BoundSource::Verification]);
+}
+
+#[test]
+fn a_ground_truth_reference_above_what_verification_reached_sets_the_bound_and_never_the_set() {
+    let row = TebRow {
+        beta: 1.0,
+        level: 3.90,
+        measured_min: 3.90,
+        extent: vec![1.0; 3],
+        boundary_radii: Vec::new(),
+        nested_share: None,
+        verification: None,
+        reference: Some(Reference { bound: 4.05, source: "grid quad10d_x beta 1 (x, y); closed form (z)".into() }),
+    };
+    // Unverified: the reference lifts the bound, the set stays the learned level.
+    assert_eq!((row.set_level(), row.bound(), row.bound_source()), (3.90, 4.05, BoundSource::Reference));
+    // Verified below the reference: the reference still sets the bound; membership is the certified set.
+    let below = verified(&row, 3.95, 4.00, "bound");
+    assert_eq!((below.set_level(), below.verified_bound(), below.bound()), (3.95, 4.00, 4.05));
+    assert_eq!(below.bound_source(), BoundSource::Reference);
+    // Verified above it: verification sets the bound.
+    let above = verified(&row, 3.95, 4.10, "bound");
+    assert_eq!((above.bound(), above.bound_source()), (4.10, BoundSource::Verification));
+    // It survives the manifest's JSON.
+    let text = serde_json::to_string(&below).unwrap();
+    assert_eq!(serde_json::from_str::<TebRow>(&text).unwrap(), below);
 }

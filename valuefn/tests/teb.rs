@@ -67,6 +67,7 @@ fn nested_shares_are_the_overlap_of_each_set_with_the_next_ones() {
         boundary_radii: Vec::new(),
         verification: None,
         nested_share: None,
+        reference: None,
     };
     let rows = [row(0.5, 0.5), row(0.75, 0.5), row(1.0, 0.8)];
     let mut rng = rand::rngs::StdRng::seed_from_u64(3);

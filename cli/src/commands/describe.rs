@@ -57,7 +57,8 @@ fn model_json(m: &pb::ModelInfo) -> Value {
             "min": c.bounds.map(|b| b.min), "max": c.bounds.map(|b| b.max)})).collect::<Vec<_>>(),
         "teb_table": m.teb_table.iter().map(|r| json!({"beta": r.beta, "set_level": r.set_level, "bound": r.bound,
             "learned_level": r.learned_level, "verified_level": r.verified_level, "extent": r.extent,
-            "nested_share": r.nested_share,
+            "nested_share": r.nested_share, "reference_bound": r.reference_bound,
+            "reference_source": r.reference_source, "bound_source": r.bound_source,
             "verification": r.verification.as_ref().map(verification_json)})).collect::<Vec<_>>(),
         "onnx_sha256": m.onnx_sha256,
     })
@@ -92,16 +93,28 @@ fn model_text(m: &pb::ModelInfo) -> String {
         out += &format!("\n    {:<8} [{}, {}] {}", p.name, r.min, r.max, p.unit);
     }
     out += "\n  TEB table (set level: membership, V <= it; bound: the error from inside that set):";
-    out += "\n  (in next: share of the set inside the next row's, 1 where they nest)";
-    out += "\n    beta      set lvl  bound    learned  verified  in next  evidence";
+    out += "\n  (in next: share of the set inside the next row's, 1 where they nest; reference: the ground truth,";
+    out += "\n  set by: what the bound is)";
+    out += "\n    beta      set lvl  bound    learned  verified  reference  set by        in next  evidence";
     for r in &m.teb_table {
         let verified = r.verified_level.map_or("-".to_string(), |v| format!("{v:.4}"));
+        let reference = r.reference_bound.map_or("-".to_string(), |v| format!("{v:.4}"));
         let nested = r.nested_share.map_or("-".to_string(), |s| format!("{s:.3}"));
         let evidence = r.verification.as_ref().map_or(String::new(), verification_text);
         out += &format!(
-            "\n    {:<8.4}  {:<7.4}  {:<7.4}  {:<7.4}  {verified:<8}  {nested:<7}  {evidence}",
-            r.beta, r.set_level, r.bound, r.learned_level
+            "\n    {:<8.4}  {:<7.4}  {:<7.4}  {:<7.4}  {verified:<8}  {reference:<9}  {:<12}  {nested:<7}  {evidence}",
+            r.beta, r.set_level, r.bound, r.learned_level, r.bound_source
         );
+    }
+    let sources: Vec<String> = m
+        .teb_table
+        .iter()
+        .filter(|r| !r.reference_source.is_empty())
+        .map(|r| format!("\n    beta {:.4}: {}", r.beta, r.reference_source))
+        .collect();
+    if !sources.is_empty() {
+        out += "\n  references:";
+        out += &sources.concat();
     }
     out
 }

@@ -4,6 +4,7 @@ mod bench;
 mod common;
 mod compare;
 mod horizon;
+mod reference;
 mod reshape;
 mod rollout;
 mod solve;
@@ -44,6 +45,9 @@ enum Command {
     Verify(verify::Args),
     /// Merges the parts of a sharded `verify` into the verified bundle and the record a single run writes.
     VerifyMerge(verify_merge::Args),
+    /// Every row's ground-truth reference (grid solutions of the system or its axes, closed forms), written
+    /// into the bundle: its served bounds never undercut it.
+    Reference(reference::Args),
     /// Measures a bundle's error-set shapes (extent, boundary radii) again at each row's set level.
     Reshape(reshape::Args),
     /// What a verification's rollouts cost per state and step, one state per call against batched on every
@@ -65,6 +69,7 @@ pub fn run(cli: Cli) -> anyhow::Result<()> {
         Command::Compare(args) => compare::run(args),
         Command::Verify(args) => verify::run(args),
         Command::VerifyMerge(args) => verify_merge::run(args),
+        Command::Reference(args) => reference::run(args),
         Command::Reshape(args) => reshape::run(args),
         Command::VerifyBench(args) => verify_bench::run(args),
         Command::Rollout(args) => rollout::run(args),

@@ -26,7 +26,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         .map(|path| {
             let solution = fastrack_gridfile::format::load(path)?;
             let beta = solution.info.params.first().copied().context("a solution without parameters")?;
-            Ok((beta, solution.values.iter().copied().fold(f64::INFINITY, f64::min)))
+            Ok((beta, solution.v_min()))
         })
         .collect::<anyhow::Result<Vec<_>>>()?;
     grid.sort_by(|a, b| a.0.total_cmp(&b.0));

@@ -399,6 +399,15 @@ pub fn decomposition(id: &str) -> Option<Vec<DecomposedAxis>> {
     }
 }
 
+/// The closed-form converged tracking error bound `V_min(beta)` of system `id`, if it has one.
+pub fn closed_form_teb(id: &str) -> Option<fn(f64) -> f64> {
+    match id {
+        double_integrator::ID => Some(double_integrator::closed_form_teb),
+        quad10d::Z_AXIS_ID => Some(quad10d::z_axis_closed_form_teb),
+        _ => None,
+    }
+}
+
 /// Every system the project defines, by id.
 pub fn by_id(id: &str) -> Option<AffineSystem> {
     match id {
