@@ -3,8 +3,9 @@
 //!
 //! A system the grid solves whole (dubins4d) takes the `V_min` of its solution at the row's `beta`, or at the
 //! next solved `beta` above it: `V_min` grows with `beta`, so that one is no smaller. A decomposed system
-//! (quad10d: the x, y and z axes) takes each axis' bound the same way from its subsystem's solutions, or from
-//! the subsystem's closed form, the larger where it has both, and combines them as the error's norm,
+//! (quad10d: the x, y and z axes) takes each axis' bound the same way from its subsystem's solutions, or, where
+//! the subsystem has a closed form, from that and a solution at the row's own `beta`, the larger of the two; it
+//! combines the axes' bounds as the error's norm,
 //! `sqrt(sum V_axis^2)`: every axis' error stays within its own bound, so the error vector within that norm.
 
 use fastrack_gridfile::solution::Solution;
@@ -30,17 +31,23 @@ impl SolvedBound {
 }
 
 /// The bound of one axis (or of a whole system) at `beta`, and where it comes from.
+/// With a closed form, a grid solution counts only at the row's own `beta` (where it may lie above the
+/// closed form by its numerical error); without one, the next solved `beta` at or above the row's.
 fn axis_bound(system: &str, beta: f64, solved: &[SolvedBound]) -> Option<(f64, String)> {
     let tolerance = 1e-9 * beta.abs().max(1.0);
-    let grid = solved
-        .iter()
-        .filter(|s| s.system == system && s.beta >= beta - tolerance)
-        .min_by(|a, b| a.beta.total_cmp(&b.beta))
-        .map(|s| (s.v_min, format!("{system}: grid at beta {} V_min {:.4}", s.beta, s.v_min)));
     let closed = closed_form_teb(system).map(|f| {
         let v = f(beta);
         (v, format!("{system}: closed form {v:.4}"))
     });
+    let usable = |s: &&SolvedBound| {
+        s.system == system
+            && if closed.is_some() { (s.beta - beta).abs() <= tolerance } else { s.beta >= beta - tolerance }
+    };
+    let grid = solved
+        .iter()
+        .filter(usable)
+        .min_by(|a, b| a.beta.total_cmp(&b.beta))
+        .map(|s| (s.v_min, format!("{system}: grid at beta {} V_min {:.4}", s.beta, s.v_min)));
     match (grid, closed) {
         (Some(g), Some(c)) => Some(if g.0 >= c.0 { g } else { c }),
         (g, c) => g.or(c),
@@ -106,11 +113,14 @@ mod tests {
         let reference = reference_at(quad10d::ID, 1.0, &[solved(x, 1.1, 0.8)]).unwrap();
         assert!((reference.bound - (2.0 * 0.8f64.powi(2) + closed * closed).sqrt()).abs() < 1e-12);
         assert!(reference.source.contains("closed form"), "{}", reference.source);
-        // A z solution above the closed form wins; one below it loses.
+        // A z solution at the row's beta above the closed form wins; one below it loses, and so does one at
+        // another beta (the closed form is exact there).
         let high = reference_at(quad10d::ID, 1.0, &[solved(x, 1.0, 0.8), solved(z, 1.0, closed + 0.1)]).unwrap();
         assert!((high.bound - (2.0 * 0.64 + (closed + 0.1).powi(2)).sqrt()).abs() < 1e-12);
         let low = reference_at(quad10d::ID, 1.0, &[solved(x, 1.0, 0.8), solved(z, 1.0, closed - 0.1)]).unwrap();
         assert!((low.bound - reference.bound).abs() < 1e-12);
+        let above = reference_at(quad10d::ID, 1.0, &[solved(x, 1.0, 0.8), solved(z, 1.5, closed + 1.0)]).unwrap();
+        assert!((above.bound - reference.bound).abs() < 1e-12);
         // No x solution at or above the row: no reference.
         assert!(reference_at(quad10d::ID, 1.2, &[solved(x, 1.1, 0.8)]).is_none());
     }

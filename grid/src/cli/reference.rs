@@ -41,8 +41,21 @@ pub fn run(args: Args) -> anyhow::Result<()> {
             solution.info.system,
             systems.join(", ")
         );
-        solved.push(SolvedBound::of(&solution));
+        let bound = SolvedBound::of(&solution);
+        if let Some((other, _)) =
+            solved.iter().find(|(_, b): &&(PathBuf, SolvedBound)| b.system == bound.system && b.beta == bound.beta)
+        {
+            anyhow::bail!(
+                "two solutions of `{}` at beta {} ({} and {}); give one per beta",
+                bound.system,
+                bound.beta,
+                other.display(),
+                path.display()
+            );
+        }
+        solved.push((path.clone(), bound));
     }
+    let solved: Vec<SolvedBound> = solved.into_iter().map(|(_, bound)| bound).collect();
     let mut manifest = bundle.manifest.clone();
     let count = set_references(&id, &mut manifest.teb_table, &solved);
     println!("beta      verified  reference  bound    set by        reference from");
