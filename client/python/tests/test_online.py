@@ -38,7 +38,6 @@ from fastrack.online import (
     LoopSetupError,
     NoPath,
     OnlineLoop,
-    OnlineLoopError,
     PlanError,
     RawPathPlanner,
     SpeedRow,
