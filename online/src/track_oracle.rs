@@ -74,7 +74,7 @@ pub async fn batch_answers(
     let n_control = reply.controls.len() / count.max(1);
     let fits = reply.values.len() == count && reply.in_teb.len() == count && reply.in_domain.len() == count;
     if !fits || reply.controls.len() != count * n_control {
-        return Err(LoopError::Core(CoreError::Setup(format!(
+        return Err(LoopError::Core(CoreError::Answer(format!(
             "TrackingControl answered a batch of {count} with {} values",
             reply.values.len()
         ))));
