@@ -23,9 +23,9 @@
 use fastrack_grid::grid::Grid;
 use fastrack_grid::solver::{solve, Solution, SolverConfig};
 use fastrack_grid::verify::{
-    apply_reports, combine_pieces, required_samples, verify_rows, verify_table, ControlLaw, Correction, Outcome,
-    RecordedStates, RowReport, SearchOptions, Selection, VerifyError, VerifyOptions, FALSIFICATION, OPERATIONAL,
-    UNIFORM, ZERO_ERROR_SLICE,
+    apply_reports, combine_pieces, required_samples, verify_rows, verify_table, ControlLaw, Correction, ErrorScale,
+    FalsificationOptions, Outcome, RecordedStates, RowReport, SearchOptions, Selection, VerifyError, VerifyOptions,
+    FALSIFICATION, OPERATIONAL, UNIFORM, ZERO_ERROR_SLICE,
 };
 use fastrack_lab::shard::Shard;
 use fastrack_valuefn::bundle::Bundle;
@@ -611,4 +611,79 @@ fn the_bound_correction_bounds_a_shrunk_table_in_one_round_whole_or_in_pieces() 
     let set = VerifyOptions { correction: Correction::Set, ..options(3) };
     let refused = verify_table(&evaluator, &mut manifest, system, &selection, &set, &ProgressBar::hidden());
     assert!(matches!(&refused, Err(VerifyError::Setting(m)) if m.contains("pieces")), "{:?}", refused.map(|r| r.len()));
+}
+
+/// The excess of the error over the start's value, `max_t |e(t)| - V(r(0))`, on the fitted network scaled
+/// by `scale`: the bound correction's one round from the set at the correct level (scaled with the network, so
+/// the same set), at `eps` 1e-2, with `options` over the shipped settings'.
+fn excess_of(scale: f64, options: VerifyOptions) -> (RowReport, f64) {
+    let (system, solution) = ground_truth();
+    let network = fitted_network(system, solution, scale);
+    let level = LEVEL_FACTOR * grid_v_min() * scale;
+    let (evaluator, bundle) = load(system, &network, level);
+    let options = VerifyOptions {
+        eps: 1e-2,
+        correction: Correction::Bound,
+        error_scale: ErrorScale::ExcessOverStartValue,
+        level_margin: 0.0,
+        min_acceptance: 0.0,
+        ..options
+    };
+    let beta = system.params[0].max;
+    let selection =
+        Selection { adversaries: std::slice::from_ref(solution), grid_tolerance: 0.1, ..bare_selection(&beta) };
+    let reports =
+        verify_rows(&evaluator, &bundle.manifest, system, &selection, Shard::WHOLE, &options, &ProgressBar::hidden())
+            .unwrap();
+    (reports[0].clone(), level)
+}
+
+#[test]
+fn the_excess_over_the_start_value_is_small_for_a_correct_value_and_grows_with_a_shrunk_one() {
+    let (correct, level) = excess_of(1.0, shipped_settings());
+    let excess = correct.verification.verified_level;
+    eprintln!("correct value: level {level:.4}, excess {excess:.4}, checks {:?}", correct.verification.checks);
+    assert_eq!(correct.outcome, Outcome::Verified);
+    assert_eq!(correct.sampled_level(), level);
+    let names: Vec<&str> = correct.verification.checks.iter().map(|c| c.distribution.as_str()).collect();
+    assert_eq!(names, [UNIFORM, ZERO_ERROR_SLICE, FALSIFICATION]);
+    // The falsification climbs the excess, not the error: it never reports less than the samples it starts from.
+    let sampled = correct.verification.checks[..2].iter().map(|c| c.max_error).fold(0.0, f64::max);
+    assert!(correct.verification.checks[2].max_error >= sampled);
+    assert!(excess < 0.25 * level, "excess {excess} of a correct value at level {level}");
+
+    // Scaling the value by SHRINK keeps its control (the gradient's signs) and its set (the level scales too),
+    // so the same starts take the same paths and each excess grows by (1 - SHRINK) V(r(0)), with V(r(0)) between
+    // the minimum and the level: an exact check of what is measured (the search, whose starts depend on the
+    // measure, is off; the proposals are drawn over the whole box, which does not scale with the level).
+    let plain = VerifyOptions {
+        search: SearchOptions { population: 0, ..SearchOptions::default() },
+        zero_error_slice: false,
+        falsification: FalsificationOptions { starts: 0, ..FalsificationOptions::default() },
+        proposal_box: 0.0,
+        ..shipped_settings()
+    };
+    let (base, _) = excess_of(1.0, plain.clone());
+    let (shrunk, _) = excess_of(SHRINK, plain);
+    let (before, after) = (base.verification.verified_level, shrunk.verification.verified_level);
+    eprintln!("uniform excess {before:.4}, shrunk by {SHRINK}: {after:.4}");
+    // The fit's minimum lies within 3% of the grid's.
+    let (low, high) = (before + (1.0 - SHRINK) * 0.97 * grid_v_min(), before + (1.0 - SHRINK) * level);
+    assert!((low..=1.01 * high).contains(&after), "shrunk excess {after} outside [{low}, {high}]");
+
+    // An excess is no level to sample under: the set correction refuses it.
+    let options = VerifyOptions { error_scale: ErrorScale::ExcessOverStartValue, ..shipped_settings() };
+    let (system, solution) = ground_truth();
+    let (evaluator, bundle) = load(system, &fitted_network(system, solution, 1.0), 1.0);
+    let beta = system.params[0].max;
+    let refused = verify_rows(
+        &evaluator,
+        &bundle.manifest,
+        system,
+        &bare_selection(&beta),
+        Shard::WHOLE,
+        &options,
+        &ProgressBar::hidden(),
+    );
+    assert!(matches!(refused, Err(VerifyError::Setting(ref why)) if why.contains("bound correction")), "{refused:?}");
 }

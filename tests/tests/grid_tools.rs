@@ -197,3 +197,90 @@ tracking = true
 
     run("fastrack-trainer", &train);
 }
+
+/// The failure output of a binary run that must fail.
+fn refused(binary: &str, args: &[&str]) -> String {
+    let output = std::process::Command::new(fastrack_e2e::binary(binary)).args(args).output().unwrap();
+    assert!(!output.status.success(), "{binary} {args:?} succeeded");
+    String::from_utf8_lossy(&output.stderr).into_owned()
+}
+
+/// The largest excess one axis' parts found at `beta` (the verification's `verified_level` there).
+fn excess_at(parts: &Path, beta: f64) -> f64 {
+    let part: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(parts.join("grid-verify-part-0-of-1.json")).unwrap()).unwrap();
+    let item = part["items"].as_array().unwrap().iter().find(|i| i["beta"].as_f64() == Some(beta)).unwrap();
+    assert_eq!(part["config"]["options"]["error_scale"], "excess-over-start-value");
+    item["verification"]["verified_level"].as_f64().unwrap()
+}
+
+#[test]
+fn a_composite_quadcopter_is_verified_by_its_axes() {
+    // Tiny runs on quad10d's x and z axes, exported as bundles of their own and composed into one.
+    let work = tempfile::tempdir().unwrap();
+    let repo = work.path().join("repo");
+    let mut runs = Vec::new();
+    for (system, seed) in [("quad10d_x", 4), ("quad10d_z", 5)] {
+        let config = work.path().join(format!("{system}.toml"));
+        std::fs::write(&config, tiny_training_config(system, "full", seed, 1.0, system)).unwrap();
+        let run_dir = work.path().join(system);
+        run("fastrack-trainer", &["train", "--config", path(&config), "--run-dir", path(&run_dir)]);
+        run("fastrack-trainer", &["export", "--run-dir", path(&run_dir), "--out", path(&repo)]);
+        runs.push(run_dir);
+    }
+    let compose = ["compose", "--axis-run", path(&runs[0]), "--axis-run", path(&runs[1]), "--name", "quad"];
+    run("fastrack-trainer", &[&compose[..], &["--out", path(&repo)]].concat());
+    let (composite, x, z) = (repo.join("quad/1"), repo.join("quad10d_x/1"), repo.join("quad10d_z/1"));
+
+    // Each axis verified at the composite's top row, its error taken less its start's value.
+    let top = Bundle::load(&composite).unwrap().manifest.teb_table.last().unwrap().beta;
+    let settings = format!("--correction bound --eps 0.1 --horizon 1 --step 0.05 --betas {top} --level-margin 0.05");
+    let verify_axis = |axis: &Path, parts: &Path| {
+        let args = format!(
+            "verify --bundle {} --axis-of {} --part-dir {} {settings}",
+            path(axis),
+            path(&composite),
+            path(parts)
+        );
+        run("fastrack-grid", &args.split_whitespace().collect::<Vec<_>>());
+    };
+    let (x_parts, z_parts) = (work.path().join("x-parts"), work.path().join("z-parts"));
+    verify_axis(&x, &x_parts);
+    verify_axis(&z, &z_parts);
+
+    // The merge composes them: the set {V <= 1.05 level} with the bound S + sqrt(2 dx^2 + dz^2) (x serves x and y).
+    let verified = work.path().join("verified");
+    let axis = |bundle: &Path, parts: &Path| format!("{}={}", path(bundle), path(parts));
+    let (x_axis, z_axis) = (axis(&x, &x_parts), axis(&z, &z_parts));
+    let merge = ["verify-merge", "--bundle", path(&composite), "--out", path(&verified), "--results-dir"];
+    let results = work.path().join("results");
+    run("fastrack-grid", &[&merge[..], &[path(&results), "--axis", &x_axis, "--axis", &z_axis]].concat());
+    let manifest = Bundle::load(&verified.join("quad/1")).unwrap().manifest;
+    let row = manifest.teb_table.last().unwrap();
+    let v = row.verification.as_ref().expect("the top row verified");
+    let sampled = 1.05 * row.level;
+    let (dx, dz) = (excess_at(&x_parts, top).max(0.0), excess_at(&z_parts, top).max(0.0));
+    assert_eq!(v.correction.as_deref(), Some("by-axes"));
+    assert!((row.set_level() - sampled).abs() < 1e-9 * sampled, "{} vs {sampled}", row.set_level());
+    let bound = sampled + (2.0 * dx * dx + dz * dz).sqrt();
+    assert!((v.verified_level - bound).abs() < 1e-9 * bound, "{} vs {bound}", v.verified_level);
+    let checks: Vec<&str> = v.checks.iter().map(|c| c.distribution.as_str()).collect();
+    assert!(checks.contains(&"quad10d_x: uniform") && checks.contains(&"quad10d_z: zero-error-slice"), "{checks:?}");
+    assert!(manifest.teb_table[..manifest.teb_table.len() - 1].iter().all(|r| r.verification.is_none()));
+
+    // Refused: an axis missing, parts given with the other axis' bundle, and an axis bundle not of this system.
+    let said = refused("fastrack-grid", &[&merge[..], &[path(&results), "--axis", &x_axis]].concat());
+    assert!(said.contains("no bundle of axis `quad10d_z` was given"), "{said}");
+    let swapped = axis(&z, &x_parts);
+    let said =
+        refused("fastrack-grid", &[&merge[..], &[path(&results), "--axis", &swapped, "--axis", &z_axis]].concat());
+    assert!(said.contains("the parts verified the graph"), "{said}");
+    let args = format!(
+        "verify --bundle {} --axis-of {} --part-dir {} {settings}",
+        path(&composite),
+        path(&composite),
+        path(&x_parts)
+    );
+    let said = refused("fastrack-grid", &args.split_whitespace().collect::<Vec<_>>());
+    assert!(said.contains("not an axis of `quad10d`"), "{said}");
+}

@@ -312,9 +312,10 @@ pub struct Verification {
     /// the iterated correction).
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub sampled_level: Option<f64>,
-    /// What the correction raised: `set` (the sampled set with the level: the set holds its own level) or
-    /// `bound` (one round: the bound on the error from the sampled set is its samples' largest error); absent
-    /// without the correction.
+    /// What the correction raised: `set` (the sampled set with the level: the set holds its own level),
+    /// `bound` (one round: the bound on the error from the sampled set is its samples' largest error) or
+    /// `by-axes` (a composed value: each axis bounds its error less its start's value, the bound is the set
+    /// level plus those excesses combined); absent without the correction.
     #[serde(default, skip_serializing_if = "Option::is_none")]
     pub correction: Option<String>,
     /// Rounds of the iterated level correction (1: the first sampled level held).
@@ -335,13 +336,14 @@ pub struct Verification {
 pub struct CheckResult {
     /// `uniform` (uniform states of the certified set), `zero-error-slice` (uniform states of its slice with
     /// every error coordinate at 0, where starts and planner resets put a robot; 0 samples: the set holds
-    /// none) or `falsification` (a search over start states of the set towards the largest error).
+    /// none) or `falsification` (a search over start states of the set towards the largest error); in a row
+    /// verified `by-axes`, prefixed by the axis subsystem (`quad10d_x: uniform`).
     pub distribution: String,
     /// States rolled out (rollouts, for the falsification).
     pub samples: usize,
     /// Those whose error exceeded the round's level (with its slack).
     pub violations: usize,
-    /// The largest tracking error reached.
+    /// The largest tracking error reached (`by-axes`: the axis' largest error less its start's value).
     pub max_error: f64,
 }
 

@@ -6,7 +6,7 @@ use anyhow::Context;
 use fastrack_grid::format;
 use fastrack_grid::solver::Solution;
 use fastrack_grid::verify::{
-    apply_reports, combine_pieces, required_samples, verify_rows, Batching, ControlLaw, Correction,
+    apply_reports, axes, combine_pieces, required_samples, verify_rows, Batching, ControlLaw, Correction, ErrorScale,
     FalsificationOptions, RecordedStates, RowReport, SearchOptions, Selection, VerifyOptions,
 };
 use fastrack_lab::record::MarkdownTable;
@@ -142,6 +142,12 @@ pub struct Args {
     /// jobs. The pieces combine into the row's one round.
     #[arg(long, default_value_t = 1)]
     pieces: usize,
+    /// Verify this bundle as an axis of the composite bundle at this path (`quad10d`'s x or z network): at the
+    /// composite's rows, on the axis' share of each row's sampled set, with each rollout's error less its
+    /// start's value (needs `--correction bound` and `--part-dir`; `verify-merge --axis` composes the axes'
+    /// parts into the composite's verification).
+    #[arg(long, requires = "part_dir")]
+    axis_of: Option<PathBuf>,
     /// Only the rows with these betas (default: every row).
     #[arg(long, value_delimiter = ',')]
     betas: Vec<f64>,
@@ -227,7 +233,16 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         control_law == ControlLaw::Grid || args.out.is_some() || args.part_dir.is_some(),
         "give --out, the repository the verified bundle is written into"
     );
-    let Loaded { bundle, system, evaluator } = args.source.load()?;
+    let Loaded { mut bundle, system, evaluator } = args.source.load()?;
+    let composite = args.axis_of.as_deref().map(Bundle::load).transpose()?;
+    if let Some(composite) = &composite {
+        anyhow::ensure!(
+            args.correction == Correction::Bound,
+            "--axis-of bounds each rollout's error less its start's value: give --correction bound"
+        );
+        bundle.manifest.teb_table = axes::axis_rows(&composite.manifest, &bundle.manifest, args.level_margin)?;
+    }
+    let error_scale = if composite.is_some() { ErrorScale::ExcessOverStartValue } else { ErrorScale::Absolute };
     let options = VerifyOptions {
         eps: args.eps,
         level_margin: args.level_margin,
@@ -261,6 +276,7 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         batching: Batching { chunk: args.chunk, parallel: !args.sequential },
         control_law,
         pieces: args.pieces,
+        error_scale,
         seed: args.seed,
     };
     let adversaries: Vec<Solution> = args
@@ -300,7 +316,9 @@ pub fn run(args: Args) -> anyhow::Result<()> {
         "betas": args.betas, "grid_solutions": args.grid_solutions, "grid_tolerance": args.grid_tolerance,
         "operational_states": args.operational_states,
         "operational_recorded": operational.as_ref().map(|r| json!({"states": r.len(), "by_branch": r.branches})),
-        "threads": rayon::current_num_threads() });
+        "threads": rayon::current_num_threads(),
+        "axis_of": composite.as_ref().map(|c| json!({ "bundle": args.axis_of, "model": c.manifest.name,
+            "version": c.manifest.version, "onnx_sha256": c.manifest.onnx_sha256 })) });
     if let Some(dir) = &args.part_dir {
         let part = Part { config, shard, wall_s: started.elapsed().as_secs_f64(), items: reports };
         let path = part.write(dir, PART_STEM).with_context(|| format!("writing the part into {}", dir.display()))?;

@@ -3,7 +3,7 @@
 //! its chunk. Every rollout carries its own random generator, seeded before the run, so the outcome does not
 //! depend on how the rollouts are split among threads.
 
-use super::VerifyError;
+use super::{ErrorScale, VerifyError};
 use crate::solver::Solution;
 use fastrack_valuefn::runtime::Evaluator;
 use fastrack_valuefn::simulation::{step_relative, HeldInputs, PlannerPolicy};
@@ -32,12 +32,21 @@ pub(super) struct Rollout {
     pub rng: StdRng,
     /// Largest tracking error so far (the start's included).
     pub max_error: f64,
+    /// The served value at the start, once the first step has evaluated it.
+    pub start_value: Option<f64>,
 }
 
 impl Rollout {
     /// A rollout from `state` with its error at the start as the largest so far.
     pub fn new(system: &AffineSystem, state: &[f64], planner: PlannerPolicy, gradient: Gradient, rng: StdRng) -> Self {
-        Self { state: state.to_vec(), planner, gradient, rng, max_error: system.tracking_error(state) }
+        Self {
+            state: state.to_vec(),
+            planner,
+            gradient,
+            rng,
+            max_error: system.tracking_error(state),
+            start_value: None,
+        }
     }
 }
 
@@ -69,9 +78,19 @@ pub(super) struct Scene<'a> {
     pub step: f64,
     pub mean_dwell: f64,
     pub batching: Batching,
+    /// What a rollout's largest error is measured against.
+    pub error_scale: ErrorScale,
 }
 
 impl Scene<'_> {
+    /// A finished rollout's largest error on the scene's scale: the error itself, or less the start's value.
+    pub fn score(&self, rollout: &Rollout) -> f64 {
+        match self.error_scale {
+            ErrorScale::Absolute => rollout.max_error,
+            ErrorScale::ExcessOverStartValue => rollout.start_value.map_or(f64::INFINITY, |v| rollout.max_error - v),
+        }
+    }
+
     /// Rolls every rollout forward over the horizon: the tracker plays the served `control` (or the grid
     /// solution's optimal control, with [`Gradient::Grid`] as the tracker), the planner its input, the
     /// disturbance the worst case of the model's gradient.
@@ -103,6 +122,7 @@ impl Scene<'_> {
         let out = self.evaluator.evaluate(&states, &params)?;
         let mut grid_grad = vec![0.0; n_state];
         for (j, rollout) in chunk.iter_mut().enumerate() {
+            rollout.start_value.get_or_insert(f64::from(out.value[j]));
             let grad: Vec<f64> = out.grad[j * n_state..(j + 1) * n_state].iter().map(|&g| f64::from(g)).collect();
             if let Some(grid) =
                 self.grid.filter(|_| rollout.gradient == Gradient::Grid || self.tracker == Gradient::Grid)

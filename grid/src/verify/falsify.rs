@@ -3,7 +3,7 @@
 //! iteration proposes `population` states in a box around each start's best state so far (half-width
 //! `scale` times each coordinate's width, halved every iteration), keeps those inside the certified set
 //! `{V <= level}`, rolls them out against the worst-case planners, and moves each start to its proposal that
-//! reached the largest error.
+//! reached the largest error (on the verification's [`ErrorScale`](super::ErrorScale)).
 
 use super::batch::{Gradient, Rollout, Scene};
 use super::VerifyError;
@@ -107,7 +107,7 @@ pub(super) fn falsify(
         scene.roll_out(&mut rollouts)?;
         rollouts_played += rollouts.len();
         for ((i, state), per_family) in inside.iter().zip(rollouts.chunks(families.len())) {
-            let error = per_family.iter().map(|r| r.max_error).fold(0.0, f64::max);
+            let error = per_family.iter().map(|r| scene.score(r)).fold(0.0, f64::max);
             if error > errors[*i] {
                 errors[*i] = error;
                 best[*i].clone_from(state);

@@ -28,6 +28,7 @@
 //! evidence: it can raise the largest error, never lower it, and the samples it starts from are chosen by the
 //! other families' errors, so the guarantee is stated for them.
 
+pub mod axes;
 mod batch;
 mod falsify;
 mod operational;
@@ -95,6 +96,30 @@ pub enum ControlLaw {
     Grid,
 }
 
+/// What a rollout's largest error is measured against.
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[serde(rename_all = "kebab-case")]
+pub enum ErrorScale {
+    /// The error itself (m): a bound on the error from one set `{V <= c}`.
+    #[default]
+    Absolute,
+    /// The error less the value at its start, `max_t |e(t)| - V(r(0))`: a bound `delta` on it gives
+    /// `|e(t)| <= V(r(0)) + delta` from every start of the sampled set, so it bounds every level below the
+    /// sampled one at once (`L + delta` from `{V <= L}`). How the axes of a composed value are verified
+    /// ([`axes`]). A correct value keeps it at most 0, up to the fit and the held control.
+    ExcessOverStartValue,
+}
+
+impl ErrorScale {
+    /// Its name in records and manifests.
+    pub fn name(self) -> &'static str {
+        match self {
+            ErrorScale::Absolute => "absolute",
+            ErrorScale::ExcessOverStartValue => "excess-over-start-value",
+        }
+    }
+}
+
 /// How to verify.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 pub struct VerifyOptions {
@@ -148,6 +173,9 @@ pub struct VerifyOptions {
     /// only: a `set` round's outcome decides the next round's level, so its samples cannot be split).
     #[serde(default = "one")]
     pub pieces: usize,
+    /// What a rollout's largest error is measured against (levels, bounds and checks are on this scale).
+    #[serde(default)]
+    pub error_scale: ErrorScale,
     /// Random seed.
     pub seed: u64,
 }
@@ -175,6 +203,7 @@ impl Default for VerifyOptions {
             min_acceptance: 5e-3,
             control_law: ControlLaw::Model,
             pieces: 1,
+            error_scale: ErrorScale::Absolute,
             seed: 11,
         }
     }
@@ -381,6 +410,12 @@ fn check(options: &VerifyOptions) -> Result<(), VerifyError> {
             "pieces = {}: only the bound correction's one round can be split into pieces",
             options.pieces
         )));
+    }
+    if options.error_scale == ErrorScale::ExcessOverStartValue && options.correction != Correction::Bound {
+        return Err(VerifyError::Setting(
+            "an excess over the start's value is bounded by the bound correction's one round: it is no level to sample under"
+                .into(),
+        ));
     }
     if !(0.0..1.0).contains(&options.min_acceptance) {
         return Err(VerifyError::Setting(format!("min acceptance = {} must lie in [0, 1)", options.min_acceptance)));
@@ -604,9 +639,9 @@ fn run_samples(
             .chunks(families.len())
             .map(|per_sample| {
                 for (r, &family) in per_sample.iter().zip(&families) {
-                    tally.add(family, r.max_error);
+                    tally.add(family, scene.score(r));
                 }
-                per_sample.iter().map(|r| r.max_error).fold(0.0, f64::max)
+                per_sample.iter().map(|r| scene.score(r)).fold(0.0, f64::max)
             })
             .collect();
         if options.search.enabled() {
@@ -696,6 +731,7 @@ pub fn verify_row(
         step: options.step,
         mean_dwell: options.mean_dwell,
         batching: options.batching,
+        error_scale: options.error_scale,
     };
     let mut level = row.level * (1.0 + options.level_margin);
     if options.min_acceptance > 0.0 {
@@ -947,6 +983,7 @@ pub fn rollout_rate(
         step: probe.step,
         mean_dwell: 1.0,
         batching: probe.batching,
+        error_scale: ErrorScale::Absolute,
     };
     let started = Instant::now();
     scene.roll_out(&mut rollouts)?;

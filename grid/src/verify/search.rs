@@ -98,8 +98,8 @@ pub(super) fn search(
         for i in 0..count {
             let members = i * options.population..(i + 1) * options.population;
             let mut order: Vec<usize> = members.collect();
-            order.sort_by(|&a, &b| rollouts[b].max_error.total_cmp(&rollouts[a].max_error));
-            best[i] = best[i].max(rollouts[order[0]].max_error);
+            order.sort_by(|&a, &b| scene.score(&rollouts[b]).total_cmp(&scene.score(&rollouts[a])));
+            best[i] = best[i].max(scene.score(&rollouts[order[0]]));
             let p = &mut up[i * segments * axes..(i + 1) * segments * axes];
             for (k, q) in p.iter_mut().enumerate() {
                 let frequency =
