@@ -248,7 +248,8 @@ fn a_composite_quadcopter_is_verified_by_its_axes() {
     verify_axis(&x, &x_parts);
     verify_axis(&z, &z_parts);
 
-    // The merge composes them: the set {V <= 1.05 level} with the bound S + sqrt(2 dx^2 + dz^2) (x serves x and y).
+    // The merge composes them: the set {V <= S = 1.05 level} with the smaller of sqrt(S^2 + 2 sum_a d_a S_a +
+    // sum_a d_a^2) and S + sqrt(sum_a d_a^2), over the axes x, y (both the x network) and z.
     let verified = work.path().join("verified");
     let axis = |bundle: &Path, parts: &Path| format!("{}={}", path(bundle), path(parts));
     let (x_axis, z_axis) = (axis(&x, &x_parts), axis(&z, &z_parts));
@@ -262,7 +263,14 @@ fn a_composite_quadcopter_is_verified_by_its_axes() {
     let (dx, dz) = (excess_at(&x_parts, top).max(0.0), excess_at(&z_parts, top).max(0.0));
     assert_eq!(v.correction.as_deref(), Some("by-axes"));
     assert!((row.set_level() - sampled).abs() < 1e-9 * sampled, "{} vs {sampled}", row.set_level());
-    let bound = sampled + (2.0 * dx * dx + dz * dz).sqrt();
+    // Each axis reaches S_a = sqrt(S^2 - L^2 + m_a^2) in the set (L, m_a: the composite's and the axis' minima).
+    let reach = |axis: &Path| {
+        let own = Bundle::load(axis).unwrap().manifest.teb_table.last().unwrap().measured_min;
+        (sampled * sampled - row.measured_min * row.measured_min + own * own).sqrt()
+    };
+    let (sx, sz) = (reach(&x), reach(&z));
+    let by_reach = (sampled * sampled + 2.0 * (2.0 * dx * sx + dz * sz) + 2.0 * dx * dx + dz * dz).sqrt();
+    let bound = by_reach.min(sampled + (2.0 * dx * dx + dz * dz).sqrt());
     assert!((v.verified_level - bound).abs() < 1e-9 * bound, "{} vs {bound}", v.verified_level);
     let checks: Vec<&str> = v.checks.iter().map(|c| c.distribution.as_str()).collect();
     assert!(checks.contains(&"quad10d_x: uniform") && checks.contains(&"quad10d_z: zero-error-slice"), "{checks:?}");

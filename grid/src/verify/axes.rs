@@ -1,16 +1,15 @@
 //! Verification of a composed value by its axes. A composite `V(r) = sqrt(sum_a V_a(r_a)^2)` over decoupled
 //! axes (quad10d: x, y, z) is certified without sampling its own sets, which fill too small a share of any box
 //! around them to sample: each axis subsystem's network is verified on its own, with every rollout's error
-//! taken less the value at its start ([`ErrorScale::ExcessOverStartValue`]). If every axis keeps
-//! `|e_a(t)| <= V_a(r_a(0)) + delta_a` (`delta_a >= 0`), the whole error keeps, by the triangle inequality in
-//! the axes, `|e(t)| = sqrt(sum_a e_a(t)^2) <= sqrt(sum_a V_a(r_a(0))^2) + sqrt(sum_a delta_a^2)`, i.e.
-//! `V(r(0)) + Delta`; so the composite's set `{V <= S}` is certified with the bound `S + Delta` (an axis
-//! subsystem that serves several axes, quad10d's x for x and y, counts once per axis).
-//!
-//! An axis is sampled where the composite's set can put it: a state of `{V <= S}` has
-//! `V_a^2 <= S^2 - sum_{b != a} V_b^2 <= S^2 - (L^2 - m_a^2)`, with `L` the composite's measured minimum
-//! (the axes' minima combined) and `m_a` the axis' own measured minimum at that `beta`
-//! ([`axis_sampled_level`]). What `eps` bounds changes with it: the share of each axis' sampled set whose
+//! taken less the value at its start ([`ErrorScale::ExcessOverStartValue`]). An axis is sampled where the
+//! composite's set can put it: a state of `{V <= S}` has `V_a^2 <= S^2 - sum_{b != a} V_b^2 <= S_a^2 =
+//! S^2 - (L^2 - m_a^2)`, with `L` the composite's measured minimum (the axes' minima combined) and `m_a` the
+//! axis' own measured minimum at that `beta` ([`axis_sampled_level`]). If every axis keeps
+//! `|e_a(t)| <= V_a(r_a(0)) + delta_a` (`delta_a >= 0`), the whole error from a start in `{V <= S}` keeps
+//! `|e(t)|^2 = sum_a e_a(t)^2 <= sum_a (V_a + delta_a)^2 = V^2 + 2 sum_a delta_a V_a + sum_a delta_a^2`, at most
+//! `S^2 + 2 sum_a delta_a S_a + sum_a delta_a^2`; and by the triangle inequality in the axes also at most
+//! `(S + sqrt(sum_a delta_a^2))^2`. The smaller of the two is the composite's bound ([`composed_bound`]; an
+//! axis subsystem that serves several axes, quad10d's x for x and y, counts once per axis). What `eps` bounds changes with it: the share of each axis' sampled set whose
 //! excess may pass its bound, not the share of the composite's set.
 
 use super::{Correction, ErrorScale, Outcome, RoundReport, RowReport, VerifyError};
@@ -79,6 +78,17 @@ pub fn axis_rows(composite: &Manifest, axis: &Manifest, level_margin: f64) -> Re
         .collect()
 }
 
+/// The bound on the error from the composite's set `{V <= sampled}` given each of its axes' largest excess
+/// of the error over the start's value and its reach there, `(delta_a, S_a)` (module docs): the smaller of
+/// `sqrt(S^2 + 2 sum_a delta_a S_a + sum_a delta_a^2)` and `S + sqrt(sum_a delta_a^2)`, with each excess
+/// taken at least 0.
+pub fn composed_bound(sampled: f64, axes: &[(f64, f64)]) -> f64 {
+    let excess_squared: f64 = axes.iter().map(|&(delta, _)| delta.max(0.0).powi(2)).sum();
+    let reached: f64 = axes.iter().map(|&(delta, reach)| delta.max(0.0) * reach).sum();
+    let by_reach = (sampled * sampled + 2.0 * reached + excess_squared).sqrt();
+    by_reach.min(sampled + excess_squared.sqrt())
+}
+
 /// One axis subsystem's verification: its bundle's manifest and its rows' reports (pieces combined).
 pub struct AxisReports<'a> {
     /// The axis bundle's manifest.
@@ -89,8 +99,8 @@ pub struct AxisReports<'a> {
 }
 
 /// The composite's row reports from its axes': for every composite row the axes verified, the set
-/// `{V <= S}` it would sample (`S = (1 + level_margin) level`) with the bound `S + Delta`, `Delta` the axes'
-/// largest excesses combined (module docs). Every axis subsystem of the decomposition must be there; a row
+/// `{V <= S}` it would sample (`S = (1 + level_margin) level`) with the [`composed_bound`] of the axes'
+/// largest excesses (module docs). Every axis subsystem of the decomposition must be there; a row
 /// one of them verified must have been verified by all, on sampled sets that cover its share of `{V <= S}`.
 /// Each check and planner family keeps its axis' largest excess, named after the axis.
 pub fn compose_reports(
@@ -149,16 +159,19 @@ fn compose_row(
                 report.sampled_level()
             )));
         }
-        found.push((axis.manifest.system.id.as_str(), report));
+        found.push((axis.manifest.system.id.as_str(), report, needed));
     }
-    let excess = |subsystem: &str| {
-        found.iter().find(|(axis, _)| *axis == subsystem).map_or(0.0, |(_, r)| r.verification.verified_level.max(0.0))
-    };
-    let bound = sampled + decomposed.iter().map(|&a| excess(a).powi(2)).sum::<f64>().sqrt();
+    // Each axis of the composite with its subsystem's excess and reach.
+    let per_axis: Vec<(f64, f64)> = decomposed
+        .iter()
+        .filter_map(|&subsystem| found.iter().find(|(axis, _, _)| *axis == subsystem))
+        .map(|(_, report, reach)| (report.verification.verified_level, *reach))
+        .collect();
+    let bound = composed_bound(sampled, &per_axis);
     let named = |axis: &str, name: &str| format!("{axis}: {name}");
     let checks: Vec<CheckResult> = found
         .iter()
-        .flat_map(|(axis, r)| {
+        .flat_map(|(axis, r, _)| {
             r.verification
                 .checks
                 .iter()
@@ -167,11 +180,11 @@ fn compose_row(
         .collect();
     let planners: Vec<PlannerResult> = found
         .iter()
-        .flat_map(|(axis, r)| {
+        .flat_map(|(axis, r, _)| {
             r.verification.planners.iter().map(move |p| PlannerResult { family: named(axis, &p.family), ..p.clone() })
         })
         .collect();
-    let reports = found.iter().map(|(_, r)| *r);
+    let reports = found.iter().map(|(_, r, _)| *r);
     let samples = reports.clone().map(|r| r.verification.samples).min().unwrap_or(0);
     let violations = reports.clone().map(|r| r.verification.violations).sum();
     let outcome = if reports.clone().any(|r| r.outcome == Outcome::LeftDomain) {
@@ -283,7 +296,7 @@ pub fn check_networks(
 
 #[cfg(test)]
 mod tests {
-    use super::axis_sampled_level;
+    use super::{axis_sampled_level, composed_bound};
 
     #[test]
     fn an_axis_is_sampled_as_far_as_the_composite_set_reaches_with_the_other_axes_at_their_minima() {
@@ -298,5 +311,18 @@ mod tests {
         }
         // A set below the composite's minimum holds no state; the axis keeps at least its own minimum.
         assert_eq!(axis_sampled_level(0.5, composite_min, 0.3), 0.3);
+    }
+
+    #[test]
+    fn the_composed_bound_is_the_largest_error_the_axes_excesses_allow_at_their_reach() {
+        // One axis with an excess: the worst start puts that axis at its reach and the others at the rest.
+        let (sampled, reach, delta) = (1.0f64, 0.3f64, 0.5f64);
+        let worst = (sampled * sampled - reach * reach + (reach + delta).powi(2)).sqrt();
+        assert!((composed_bound(sampled, &[(0.0, 0.7), (0.0, 0.7), (delta, reach)]) - worst).abs() < 1e-12);
+        // Where every axis reaches the whole set, the triangle inequality is the smaller.
+        let spread = composed_bound(sampled, &[(0.1, 1.0), (0.1, 1.0), (0.1, 1.0)]);
+        assert!((spread - (sampled + (3.0f64 * 0.01).sqrt())).abs() < 1e-12);
+        // Negative excesses count as none: the set's own level.
+        assert_eq!(composed_bound(sampled, &[(-0.2, 0.7), (-0.1, 0.5)]), sampled);
     }
 }
