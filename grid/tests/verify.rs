@@ -208,6 +208,17 @@ fn bare_selection(beta: &f64) -> Selection<'_> {
     Selection { betas: Some(std::slice::from_ref(beta)), ..Selection::default() }
 }
 
+/// The row at `beta` of a double-integrator bundle verified alone, whole, with `options`.
+fn verify_alone(
+    evaluator: &Evaluator,
+    manifest: &Manifest,
+    beta: f64,
+    options: &VerifyOptions,
+) -> Result<Vec<RowReport>, VerifyError> {
+    let system = &ground_truth().0;
+    verify_rows(evaluator, manifest, system, &bare_selection(&beta), Shard::WHOLE, options, &ProgressBar::hidden())
+}
+
 fn rayon_threads() -> usize {
     std::thread::available_parallelism().map_or(1, |n| n.get())
 }
@@ -513,16 +524,7 @@ fn a_set_that_reaches_the_domains_edge_is_not_verified() {
     let beta = system.params[0].max;
     for correction in [Correction::Set, Correction::Bound] {
         let options = VerifyOptions { eps: 2e-2, delta: 1e-3, correction, ..shipped_settings() };
-        let reports = verify_rows(
-            &evaluator,
-            &bundle.manifest,
-            system,
-            &bare_selection(&beta),
-            Shard::WHOLE,
-            &options,
-            &ProgressBar::hidden(),
-        )
-        .unwrap();
+        let reports = verify_alone(&evaluator, &bundle.manifest, beta, &options).unwrap();
         assert_eq!(reports[0].outcome, Outcome::LeftDomain, "{correction:?}: {:?}", reports[0].rounds);
         assert_eq!(reports[0].rounds.len(), 1);
         // Under the bound correction nothing is a violation, so only the refusal can flag the row.
@@ -676,14 +678,6 @@ fn the_excess_over_the_start_value_is_small_for_a_correct_value_and_grows_with_a
     let (system, solution) = ground_truth();
     let (evaluator, bundle) = load(system, &fitted_network(system, solution, 1.0), 1.0);
     let beta = system.params[0].max;
-    let refused = verify_rows(
-        &evaluator,
-        &bundle.manifest,
-        system,
-        &bare_selection(&beta),
-        Shard::WHOLE,
-        &options,
-        &ProgressBar::hidden(),
-    );
+    let refused = verify_alone(&evaluator, &bundle.manifest, beta, &options);
     assert!(matches!(refused, Err(VerifyError::Setting(ref why)) if why.contains("bound correction")), "{refused:?}");
 }
