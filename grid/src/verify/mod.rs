@@ -27,6 +27,10 @@
 //! families and this horizon; under the set correction it is at most `(1 + slack) c`. The search only adds
 //! evidence: it can raise the largest error, never lower it, and the samples it starts from are chosen by the
 //! other families' errors, so the guarantee is stated for them.
+//!
+//! A composed value (a system decomposed into axes) is verified through its axes instead ([`axes`]): each
+//! axis network on its own, every error taken less the value at its start ([`ErrorScale`]), which certifies
+//! every level of the composite at once.
 
 pub mod axes;
 mod batch;
@@ -97,7 +101,7 @@ pub enum ControlLaw {
 }
 
 /// What a rollout's largest error is measured against.
-#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize, clap::ValueEnum)]
+#[derive(Debug, Clone, Copy, Default, PartialEq, Eq, Serialize, Deserialize)]
 #[serde(rename_all = "kebab-case")]
 pub enum ErrorScale {
     /// The error itself (m): a bound on the error from one set `{V <= c}`.
