@@ -146,7 +146,7 @@ pub struct Args {
     /// composite's rows, on the axis' share of each row's sampled set, with each rollout's error less its
     /// start's value (needs `--correction bound` and `--part-dir`; `verify-merge --axis` composes the axes'
     /// parts into the composite's verification).
-    #[arg(long, requires = "part_dir")]
+    #[arg(long, requires = "part_dir", conflicts_with = "out")]
     axis_of: Option<PathBuf>,
     /// Only the rows with these betas (default: every row).
     #[arg(long, value_delimiter = ',')]
