@@ -93,24 +93,23 @@ fn compose_axes(
             .with_context(|| format!("the options of the parts in {}", dir.display()))?;
         axes::check_scale(options.error_scale)?;
         let graph = Evaluator::new(runtime(None)?, &bundle.onnx, GraphDims::of(&bundle.manifest), 1)?;
-        loaded.push((bundle, graph, options, merged));
+        let reports = combine_pieces(merged.items)?;
+        loaded.push((bundle, graph, options, merged.config, reports));
     }
-    let margins: Vec<f64> = loaded.iter().map(|(_, _, o, _)| o.level_margin).collect();
+    let margins: Vec<f64> = loaded.iter().map(|(_, _, o, _, _)| o.level_margin).collect();
     anyhow::ensure!(
         margins.windows(2).all(|w| w[0] == w[1]),
         "the axes were verified with different level margins ({margins:?}): their sets are not one composite set"
     );
     let pairs: Vec<(&Evaluator, &fastrack_valuefn::manifest::Manifest)> =
-        loaded.iter().map(|(b, g, _, _)| (g, &b.manifest)).collect();
+        loaded.iter().map(|(b, g, _, _, _)| (g, &b.manifest)).collect();
     let mut rng = rand::rngs::StdRng::seed_from_u64(3);
     axes::check_networks((evaluator, &composite.manifest), &pairs, COMPOSITION_CHECKS, &mut rng)?;
-    let mut per_axis = Vec::new();
-    for (bundle, _, _, merged) in &loaded {
-        per_axis.push(AxisReports { manifest: &bundle.manifest, reports: combine_pieces(merged.items.clone())? });
-    }
+    let per_axis: Vec<AxisReports<'_>> =
+        loaded.iter().map(|(b, _, _, _, reports)| AxisReports { manifest: &b.manifest, reports }).collect();
     let reports = axes::compose_reports(&composite.manifest, &per_axis, margins.first().copied().unwrap_or(0.0))?;
     let config = json!({ "model": composite.manifest.name, "version": composite.manifest.version,
-        "onnx_sha256": composite.manifest.onnx_sha256, "by_axes": loaded.iter().map(|(b, _, _, m)| json!({
-            "bundle": b.dir, "subsystem": b.manifest.system.id, "config": m.config })).collect::<Vec<_>>() });
+        "onnx_sha256": composite.manifest.onnx_sha256, "by_axes": loaded.iter().map(|(b, _, _, config, _)| json!({
+            "bundle": b.dir, "subsystem": b.manifest.system.id, "config": config })).collect::<Vec<_>>() });
     Ok((reports, config))
 }

@@ -95,7 +95,7 @@ pub struct AxisReports<'a> {
     pub manifest: &'a Manifest,
     /// Its reports, verified with [`ErrorScale::ExcessOverStartValue`] and the bound correction at
     /// [`axis_rows`]' levels.
-    pub reports: Vec<RowReport>,
+    pub reports: &'a [RowReport],
 }
 
 /// The composite's row reports from its axes': for every composite row the axes verified, the set
@@ -262,8 +262,7 @@ pub fn check_networks(
     let decomposition = decomposition(&manifest.system.id).ok_or_else(|| {
         VerifyError::Setting(format!("system `{}` has no decomposition into axes", manifest.system.id))
     })?;
-    let (lo, hi) =
-        manifest.params.iter().fold((f64::NEG_INFINITY, f64::INFINITY), |(lo, hi), p| (lo.max(p.min), hi.min(p.max)));
+    let (lo, hi) = manifest.beta_range();
     let beta = rng.random_range(lo..=hi);
     let states: Vec<f64> = (0..count)
         .flat_map(|_| manifest.state.iter().map(|d| rng.random_range(d.min..=d.max)).collect::<Vec<_>>())
