@@ -295,7 +295,7 @@ struct TickSampler {
     /// `Q`, row-major `[n_state x planner_dim]`.
     planner_to_state: Vec<f64>,
     planner_dim: usize,
-    /// Obstacle distances are drawn from `[0, d_obs_max]`.
+    /// PlaneObstacle distances are drawn from `[0, d_obs_max]`.
     d_obs_max: f64,
 }
 

@@ -11,7 +11,7 @@
 //! changes only when the report is returned. A driver answers over the network (`online_loop::OnlineLoop`,
 //! over a `Track` stream) or in process.
 
-use crate::geometry::{clearance, norm, remember, sub, Obstacle, Point};
+use crate::geometry::{clearance, inside, norm, remember, sub, Obstacle, Point};
 use crate::raw_path::{advance_along, PlanError, PlanRequest, RawPathPlanner};
 use fastrack_proto::planner_speed::{planner_rule, query_planner_control, row_for, PlannerSpeed, SpeedRow, SpeedRule};
 use serde::{Deserialize, Serialize};
@@ -59,7 +59,7 @@ impl Branch {
 pub struct ModelView {
     /// The TEB table as the planner-speed rule reads it, slowest row first.
     pub speeds: Vec<SpeedRow>,
-    /// `Q`, row-major `n_state x 2`: the planner's position in the state space.
+    /// `Q`, row-major `n_state x D`: the planner's position in the state space.
     pub planner_to_state: Vec<f64>,
     /// State coordinates.
     pub n_state: usize,
@@ -78,13 +78,13 @@ pub const DEFAULT_RESET_CANDIDATES: usize = 256;
 
 /// How the core runs.
 #[derive(Debug, Clone, Copy, PartialEq)]
-pub struct CoreSettings {
+pub struct CoreSettings<const D: usize> {
     /// Control period `dt` (s): the planner moves at most `beta_query dt` per axis per step.
     pub control_period: f64,
     /// Where the planner goes.
-    pub goal: Point,
+    pub goal: Point<D>,
     /// The workspace, `(min, max)`, for the raw-path planner.
-    pub bounds: (Point, Point),
+    pub bounds: (Point<D>, Point<D>),
     /// Reset candidates asked about per reset before the planner holds.
     pub reset_candidates: usize,
     /// The rule that picks `beta_query`: the paper's on the tracker's distance to the nearest sensed obstacle,
@@ -92,7 +92,7 @@ pub struct CoreSettings {
     pub rule: SpeedRule,
 }
 
-impl CoreSettings {
+impl<const D: usize> CoreSettings<D> {
     /// Why these settings cannot drive a loop, if they cannot.
     pub fn check(&self) -> Result<(), CoreError> {
         if !(self.control_period.is_finite() && self.control_period > 0.0) {
@@ -110,14 +110,14 @@ impl CoreSettings {
 
 /// What the core asks of the model.
 #[derive(Debug, Clone, PartialEq)]
-pub enum Query {
+pub enum Query<const D: usize> {
     /// Value, membership and control at `r = s - Q p` for the tracker state and one planner state, under
     /// `beta`; `d_obs` is the step's distance to the nearest sensed obstacle (a `Track` tick carries it).
     Tick {
         /// The tracker state `s`.
         tracker: Vec<f64>,
         /// The planner state `p`.
-        planner: Point,
+        planner: Point<D>,
         /// `d_obs` (`None`: nothing sensed).
         d_obs: Option<f64>,
         /// The planner rule's clearance (`None`: the paper's rule on `d_obs`).
@@ -151,7 +151,7 @@ pub struct Answer {
 
 /// What one step decided.
 #[derive(Debug, Clone, PartialEq)]
-pub struct StepReport {
+pub struct StepReport<const D: usize> {
     /// Distance from the tracker to the nearest obstacle sensed so far (`None`: none sensed).
     pub d_obs: Option<f64>,
     /// The previous step's `beta_query`.
@@ -167,7 +167,7 @@ pub struct StepReport {
     /// adjustPlannerControl's branch.
     pub branch: Branch,
     /// The planner state after the step, `p_next`.
-    pub planner: Point,
+    pub planner: Point<D>,
     /// The optimal tracking control at `r_next = s - Q p_next` under `beta_query`.
     pub control: Vec<f64>,
     /// The relative state `r_next`.
@@ -211,89 +211,107 @@ pub enum CoreError {
     },
 }
 
-/// `count` reset candidates in the disc of radius `radius` around `position`: the position itself first,
-/// then a sunflower spiral, point `k` at distance `radius sqrt((k - 1/2) / (count - 1))` and angle `k` times
-/// the golden angle `pi (3 - sqrt 5)`, which covers the disc evenly at every count. Deterministic, so that
-/// every implementation of the loop asks about the same points (the Python client's included).
-pub fn reset_candidates(position: Point, radius: f64, count: usize) -> Vec<Point> {
+/// `count` reset candidates in the disc (plane) or ball (space) of radius `radius` around `position`: the
+/// position itself first, then points that cover the disc or ball evenly at every count. In the plane a
+/// sunflower spiral: point `k` at distance `radius sqrt((k - 1/2) / (count - 1))` and angle `k` times the
+/// golden angle `pi (3 - sqrt 5)`. In space the additive sequence of the generalized golden ratio (`u_k =
+/// frac(k / phi^i)`, i = 1, 2, 3, `phi^4 = phi + 1`) mapped to the ball by volume: distance `radius u_1^(1/3)`,
+/// height `1 - 2 u_2` and azimuth `2 pi u_3` on the unit sphere. Deterministic, so that every implementation
+/// of the loop asks about the same points (the Python client's included).
+pub fn reset_candidates<const D: usize>(position: Point<D>, radius: f64, count: usize) -> Vec<Point<D>> {
+    const { assert!(D == 2 || D == 3, "reset candidates are defined in the plane and in space") };
     let golden_angle = std::f64::consts::PI * (3.0 - 5f64.sqrt());
     let rest = count.saturating_sub(1) as f64;
+    let phi: f64 = 1.220_744_084_605_759_5;
     (0..count)
         .map(|k| {
+            let mut p = position;
             if k == 0 {
-                return position;
+                return p;
             }
-            let (distance, angle) = (radius * ((k as f64 - 0.5) / rest).sqrt(), k as f64 * golden_angle);
-            [position[0] + distance * angle.cos(), position[1] + distance * angle.sin()]
+            if D == 2 {
+                let (distance, angle) = (radius * ((k as f64 - 0.5) / rest).sqrt(), k as f64 * golden_angle);
+                p[0] += distance * angle.cos();
+                p[1] += distance * angle.sin();
+            } else {
+                let u = [1, 2, 3].map(|i| (0.5 + k as f64 / phi.powi(i)).fract());
+                let (distance, height, azimuth) =
+                    (radius * u[0].cbrt(), 1.0 - 2.0 * u[1], std::f64::consts::TAU * u[2]);
+                let across = (1.0 - height * height).sqrt();
+                p[0] += distance * across * azimuth.cos();
+                p[1] += distance * across * azimuth.sin();
+                p[2] += distance * height;
+            }
+            p
         })
         .collect()
 }
 
 /// The I/O-free state of one robot's loop.
-pub struct LoopCore {
+pub struct LoopCore<O, const D: usize> {
     view: ModelView,
-    settings: CoreSettings,
+    settings: CoreSettings<D>,
     beta_query: f64,
     certificate_age: f64,
     replan_flag: bool,
-    planner: Point,
-    raw_path: VecDeque<Point>,
-    obstacles: Vec<Obstacle>,
+    planner: Point<D>,
+    raw_path: VecDeque<Point<D>>,
+    obstacles: Vec<O>,
 }
 
 /// Where a step stands between questions.
 #[derive(Debug, Clone)]
-enum Stage {
+enum Stage<const D: usize> {
     /// Waiting for the tick at `p_next`, the path consumed up to it; `rising` when `beta_query > beta_old`.
-    Advance { p_next: Point, ahead: VecDeque<Point>, rising: bool },
+    Advance { p_next: Point<D>, ahead: VecDeque<Point<D>>, rising: bool },
     /// Waiting for the batch of candidates that move the planner back into the set of `row`, in force.
-    Reanchor { free: Vec<Point>, row: SpeedRow },
+    Reanchor { free: Vec<Point<D>>, row: SpeedRow },
     /// Waiting for the answer at `p_next` moved at `beta_old`, under `row` (a refused rise).
-    Steady { p_next: Point, ahead: VecDeque<Point>, row: SpeedRow },
+    Steady { p_next: Point<D>, ahead: VecDeque<Point<D>>, row: SpeedRow },
     /// Waiting for the tick at `p*`, the raw-path state `index` states along.
-    Keep { index: usize, p_star: Point },
+    Keep { index: usize, p_star: Point<D> },
     /// Waiting for the batch of reset candidates.
-    Candidates { free: Vec<Point> },
+    Candidates { free: Vec<Point<D>> },
     /// Waiting for the tick at the chosen reset point.
-    Reset { candidate: Point },
+    Reset { candidate: Point<D> },
     /// Waiting for the held state's answer under the row answering for `beta_old`.
     Hold { row: SpeedRow },
 }
 
 /// One step in progress: ask [`Step::query`], give the model's answers to [`Step::answer`].
 #[derive(Debug, Clone)]
-pub struct Step {
+pub struct Step<const D: usize> {
     tracker: Vec<f64>,
-    position: Point,
+    position: Point<D>,
     d_obs: Option<f64>,
     planner_clearance: Option<f64>,
     beta_old: f64,
     speed: PlannerSpeed,
     replanned: bool,
     round_trips: usize,
-    stage: Stage,
-    query: Query,
+    stage: Stage<D>,
+    query: Query<D>,
 }
 
 /// What a step needs next.
 #[derive(Debug)]
-pub enum Progress {
+pub enum Progress<const D: usize> {
     /// Another question.
-    Ask(Step),
+    Ask(Step<D>),
     /// The step is decided; the core has taken it.
-    Done(StepReport),
+    Done(StepReport<D>),
 }
 
-impl LoopCore {
+impl<O: Obstacle<D>, const D: usize> LoopCore<O, D> {
     /// A loop with the planner at `start` (its initial state `p_0`) and `beta_u` in force.
-    pub fn new(view: ModelView, settings: CoreSettings, start: Point) -> Result<Self, CoreError> {
+    pub fn new(view: ModelView, settings: CoreSettings<D>, start: Point<D>) -> Result<Self, CoreError> {
         settings.check()?;
-        if view.planner_to_state.len() != 2 * view.n_state {
+        if view.planner_to_state.len() != D * view.n_state {
             return Err(CoreError::Setup(format!(
-                "Q has {} entries; a 2-D planner in a {}-D state needs {}",
+                "Q has {} entries; a {D}-D planner in a {}-D state needs {}",
                 view.planner_to_state.len(),
                 view.n_state,
-                2 * view.n_state
+                D * view.n_state
             )));
         }
         let beta_u =
@@ -312,17 +330,17 @@ impl LoopCore {
     }
 
     /// The planner's current state `p`.
-    pub fn planner(&self) -> Point {
+    pub fn planner(&self) -> Point<D> {
         self.planner
     }
 
     /// What is left of the raw path after the planner's state.
-    pub fn raw_path(&self) -> impl Iterator<Item = &Point> {
+    pub fn raw_path(&self) -> impl Iterator<Item = &Point<D>> {
         self.raw_path.iter()
     }
 
     /// The obstacles sensed so far.
-    pub fn obstacles(&self) -> &[Obstacle] {
+    pub fn obstacles(&self) -> &[O] {
         &self.obstacles
     }
 
@@ -346,16 +364,16 @@ impl LoopCore {
         Ok(())
     }
 
-    /// The tracker's position in the planner's plane, `Q^T s`.
-    pub fn tracker_position(&self, tracker: &[f64]) -> Point {
+    /// The tracker's position in the planner's position space, `Q^T s`.
+    pub fn tracker_position(&self, tracker: &[f64]) -> Point<D> {
         let q = &self.view.planner_to_state;
-        [0, 1].map(|j| (0..self.view.n_state).map(|i| q[2 * i + j] * tracker[i]).sum())
+        std::array::from_fn(|j| (0..self.view.n_state).map(|i| q[D * i + j] * tracker[i]).sum())
     }
 
     /// `r = s - Q p`.
-    pub fn relative_state(&self, tracker: &[f64], p: Point) -> Vec<f64> {
+    pub fn relative_state(&self, tracker: &[f64], p: Point<D>) -> Vec<f64> {
         let q = &self.view.planner_to_state;
-        (0..self.view.n_state).map(|i| tracker[i] - q[2 * i] * p[0] - q[2 * i + 1] * p[1]).collect()
+        (0..self.view.n_state).map(|i| tracker[i] - (0..D).map(|j| q[D * i + j] * p[j]).sum::<f64>()).collect()
     }
 
     /// Begins the step for tracker state `tracker` and the obstacles sensed now: remembers them, applies
@@ -364,9 +382,9 @@ impl LoopCore {
     pub fn begin(
         &mut self,
         tracker: &[f64],
-        sensed: &[Obstacle],
-        planner: &mut dyn RawPathPlanner,
-    ) -> Result<Step, CoreError> {
+        sensed: &[O],
+        planner: &mut dyn RawPathPlanner<O, D>,
+    ) -> Result<Step<D>, CoreError> {
         if tracker.len() != self.view.n_state {
             return Err(CoreError::Tracker(format!(
                 "{} values; the model's state has {}",
@@ -382,9 +400,10 @@ impl LoopCore {
         let d_obs = (!self.obstacles.is_empty()).then(|| clearance(&self.obstacles, position));
         let beta_old = self.beta_query;
         let planner_clearance = match self.settings.rule {
-            // Less the farthest a period's move takes the planner, so that the move keeps the bound clear.
+            // Less the farthest a period's move takes the planner (`beta_u dt` on every axis), so that the move
+            // keeps the bound clear.
             SpeedRule::Planner => (!self.obstacles.is_empty()).then(|| {
-                let reach = std::f64::consts::SQRT_2 * self.beta_u() * self.settings.control_period;
+                let reach = (D as f64).sqrt() * self.beta_u() * self.settings.control_period;
                 (clearance(&self.obstacles, self.planner) - reach).max(0.0)
             }),
             SpeedRule::HalfDistance => None,
@@ -468,7 +487,7 @@ impl LoopCore {
 
     /// Asks about the free reset candidates around the tracker under the step's `beta_query`, or holds if
     /// none is free.
-    fn ask_candidates(&mut self, mut step: Step) -> Result<Step, CoreError> {
+    fn ask_candidates(&mut self, mut step: Step<D>) -> Result<Step<D>, CoreError> {
         let free = self.free_candidates(step.position, step.speed.dteb_radius, step.speed.steb_radius);
         if free.is_empty() {
             return self.hold(step);
@@ -482,7 +501,7 @@ impl LoopCore {
 
     /// `p*`: the state of the planner and the raw path closest to the tracker, with the number of raw-path
     /// states before it (0: the planner's own state).
-    fn closest_path_state(&self, position: Point) -> (usize, Point) {
+    fn closest_path_state(&self, position: Point<D>) -> (usize, Point<D>) {
         std::iter::once(self.planner)
             .chain(self.raw_path.iter().copied())
             .enumerate()
@@ -490,22 +509,22 @@ impl LoopCore {
             .unwrap_or((0, self.planner))
     }
 
-    /// Free reset candidates for a row of bound `bound`: [`reset_candidates`] in the disc of that radius
-    /// around the tracker's position, those inside the workspace (a planner reset outside it, where a tracker
+    /// Free reset candidates for a row of bound `bound`: [`reset_candidates`] in the disc or ball of that
+    /// radius around the tracker's position, those inside the workspace (a planner reset outside it, where a tracker
     /// may overshoot its edge, could plan no path back) and farther than the sTEB and the row's bound from
     /// every sensed obstacle.
-    fn free_candidates(&self, position: Point, bound: f64, steb_radius: f64) -> Vec<Point> {
-        let (lo, hi) = self.settings.bounds;
-        let inside = |p: Point| p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1];
+    fn free_candidates(&self, position: Point<D>, bound: f64, steb_radius: f64) -> Vec<Point<D>> {
         reset_candidates(position, bound, self.settings.reset_candidates)
             .into_iter()
-            .filter(|&candidate| inside(candidate) && self.clears(candidate, bound.max(steb_radius)))
+            .filter(|&candidate| {
+                inside(candidate, self.settings.bounds) && self.clears(candidate, bound.max(steb_radius))
+            })
             .collect()
     }
 
     /// True when `p` lies farther than `bound` from every sensed obstacle: a tracker within `bound` of a
     /// planner at `p` touches none of them.
-    fn clears(&self, p: Point, bound: f64) -> bool {
+    fn clears(&self, p: Point<D>, bound: f64) -> bool {
         clearance(&self.obstacles, p) > bound
     }
 
@@ -523,7 +542,7 @@ impl LoopCore {
 
     /// A refused rise: the planner moves along the raw path at `beta_old`, under its row, whose certificate
     /// still runs, or waits where it is if that would bring it within the row's bound of a sensed obstacle.
-    fn steady(&self, mut step: Step) -> Result<Step, CoreError> {
+    fn steady(&self, mut step: Step<D>) -> Result<Step<D>, CoreError> {
         let row = self.row_in_force(step.beta_old)?;
         let mut ahead = self.raw_path.clone();
         let p_next = advance_along(self.planner, &mut ahead, row.beta * self.settings.control_period);
@@ -537,7 +556,7 @@ impl LoopCore {
     }
 
     /// The hold's question: the held planner state's relative state under the row answering for `beta_old`.
-    fn hold(&self, mut step: Step) -> Result<Step, CoreError> {
+    fn hold(&self, mut step: Step<D>) -> Result<Step<D>, CoreError> {
         let row = self.row_in_force(step.beta_old)?;
         step.query = Query::Batch { states: self.relative_state(&step.tracker, self.planner), beta: row.beta };
         step.stage = Stage::Hold { row };
@@ -547,7 +566,14 @@ impl LoopCore {
 
     /// Finishes a step on `branch` with the planner at `p_next`, `answer` the model's at it, under `held`'s
     /// row on a hold and the step's `beta_query` otherwise.
-    fn done(&mut self, step: Step, branch: Branch, p_next: Point, answer: Answer, held: Option<SpeedRow>) -> Progress {
+    fn done(
+        &mut self,
+        step: Step<D>,
+        branch: Branch,
+        p_next: Point<D>,
+        answer: Answer,
+        held: Option<SpeedRow>,
+    ) -> Progress<D> {
         let (beta_query, dteb_radius) = match held {
             Some(row) => (row.beta, row.bound),
             None => (step.speed.beta, step.speed.dteb_radius),
@@ -577,15 +603,19 @@ impl LoopCore {
     }
 }
 
-impl Step {
+impl<const D: usize> Step<D> {
     /// What the step needs to know next.
-    pub fn query(&self) -> &Query {
+    pub fn query(&self) -> &Query<D> {
         &self.query
     }
 
     /// Gives the model's answers to [`Step::query`] (one per state asked about, in order) and returns the
     /// next question or the decided step.
-    pub fn answer(mut self, core: &mut LoopCore, answers: Vec<Answer>) -> Result<Progress, CoreError> {
+    pub fn answer<O: Obstacle<D>>(
+        mut self,
+        core: &mut LoopCore<O, D>,
+        answers: Vec<Answer>,
+    ) -> Result<Progress<D>, CoreError> {
         let asked = match &self.query {
             Query::Tick { .. } => 1,
             Query::Batch { states, .. } => states.len() / core.view.n_state,
@@ -663,19 +693,20 @@ impl Step {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::PlaneObstacle;
 
     /// A planner that goes straight to the goal.
     struct Straight;
 
-    impl RawPathPlanner for Straight {
-        fn plan(&mut self, request: &PlanRequest<'_>) -> Result<Vec<Point>, PlanError> {
+    impl<O: Obstacle<D>, const D: usize> RawPathPlanner<O, D> for Straight {
+        fn plan(&mut self, request: &PlanRequest<'_, O, D>) -> Result<Vec<Point<D>>, PlanError> {
             Ok(vec![request.start, request.goal])
         }
     }
 
     /// A table of `beta` 0.5 / 1.0 / 1.5 with bounds 0.5 / 1.0 / 1.5, the double integrator's `Q` in 2-D
     /// (`s = (x, y, vx, vy)`).
-    fn core() -> LoopCore {
+    fn core() -> LoopCore<PlaneObstacle, 2> {
         let speeds = [0.5, 1.0, 1.5].map(|b| SpeedRow { beta: b, bound: b }).to_vec();
         let view = ModelView {
             speeds,
@@ -715,6 +746,34 @@ mod tests {
         assert!(reset_candidates(centre, radius, 0).is_empty());
     }
 
+    #[test]
+    fn reset_candidates_in_space_start_at_the_position_and_fill_the_ball_evenly() {
+        let (centre, radius) = ([1.0, -2.0, 3.0], 2.0);
+        let points = reset_candidates(centre, radius, 256);
+        assert_eq!((points.len(), points[0]), (256, centre));
+        assert!(points.iter().all(|&p| norm(sub(p, centre)) <= radius + 1e-12));
+        // Every point of a lattice in the ball lies near a candidate, and each octant holds about an eighth.
+        let mut worst: f64 = 0.0;
+        for i in -8..=8 {
+            for j in -8..=8 {
+                for k in -8..=8 {
+                    let q = [i, j, k].map(|n| n as f64 * radius / 8.0);
+                    if norm(q) <= radius {
+                        let q = [centre[0] + q[0], centre[1] + q[1], centre[2] + q[2]];
+                        let nearest = points.iter().map(|&p| norm(sub(p, q))).fold(f64::INFINITY, f64::min);
+                        worst = worst.max(nearest);
+                    }
+                }
+            }
+        }
+        assert!(worst < 0.4 * radius, "a lattice point {worst} m from every candidate");
+        for octant in 0..8 {
+            let sign = |axis: usize| if octant >> axis & 1 == 1 { 1.0 } else { -1.0 };
+            let count = points[1..].iter().filter(|p| (0..3).all(|a| (p[a] - centre[a]) * sign(a) > 0.0)).count();
+            assert!((20..=44).contains(&count), "octant {octant} holds {count} of 255");
+        }
+    }
+
     /// An answer for the relative state of `query`'s first state (or `r`), with membership `in_set`.
     fn answer(r: Vec<f64>, in_set: bool) -> Answer {
         Answer { relative_state: r, value: 0.1, in_set, in_domain: true, control: vec![0.0, 0.0] }
@@ -722,12 +781,12 @@ mod tests {
 
     /// Runs a step to its end, answering ticks with `tick_in_set` and each batch item with `batch_in_set`.
     fn run(
-        core: &mut LoopCore,
+        core: &mut LoopCore<PlaneObstacle, 2>,
         tracker: &[f64],
-        sensed: &[Obstacle],
+        sensed: &[PlaneObstacle],
         tick_in_set: bool,
         batch_in_set: bool,
-    ) -> (StepReport, Vec<Query>) {
+    ) -> (StepReport<2>, Vec<Query<2>>) {
         let mut step = core.begin(tracker, sensed, &mut Straight).unwrap();
         let mut asked = Vec::new();
         loop {
@@ -746,7 +805,7 @@ mod tests {
         }
     }
 
-    const OBSTACLE: Obstacle = Obstacle::Circle { center: [2.0, 0.0], radius: 0.5 };
+    const OBSTACLE: PlaneObstacle = PlaneObstacle::Circle { center: [2.0, 0.0], radius: 0.5 };
 
     #[test]
     fn with_nothing_sensed_the_planner_advances_at_beta_u_with_one_question() {
@@ -826,7 +885,7 @@ mod tests {
         run(&mut core, &[0.0; 4], &[], true, true);
         // The planner at (0.15, 0), 0.4 m from the obstacle's edge; the tracker 1.04 m from it: beta 0.5, whose
         // bound 0.5 a planner kept at p* would not keep clear.
-        let obstacle = Obstacle::Circle { center: [0.15, 0.8], radius: 0.4 };
+        let obstacle = PlaneObstacle::Circle { center: [0.15, 0.8], radius: 0.4 };
         let (report, asked) = run(&mut core, &[-1.05, 0.0, 0.0, 0.0], &[obstacle], true, true);
         assert_eq!((report.branch, report.beta_query, report.round_trips), (Branch::Reset, 0.5, 2));
         assert!(matches!(asked[..], [Query::Batch { .. }, Query::Tick { .. }]), "no keep asked: {asked:?}");
@@ -895,7 +954,7 @@ mod tests {
         let mut core = core();
         run(&mut core, &[0.0; 4], &[], true, true);
         // Beside the path, 1.6 m from the planner: far enough for the planner to move on under beta 1.5.
-        let beside = Obstacle::Circle { center: [0.1, -2.1], radius: 0.5 };
+        let beside = PlaneObstacle::Circle { center: [0.1, -2.1], radius: 0.5 };
         run(&mut core, &[0.1, 0.0, 0.0, 0.0], &[beside], true, true);
         assert_eq!(core.beta_in_force(), 0.5);
         // Far from the obstacle: the rule allows 1.5 again, but the state lies outside that row's set.

@@ -12,13 +12,13 @@
 //!
 //! [`GridAStar`]: crate::raw_path::GridAStar
 
-use crate::geometry::{clearance, segment_is_free, sub, Obstacle, Point};
+use crate::geometry::{chebyshev_norm, clearance, lerp, segment_is_free, sub, Obstacle, Point};
 use crate::raw_path::{Cell, CellGrid, PlanError, PlanRequest, RawPathPlanner};
 use fastrack_proto::planner_speed::{SpeedRow, SpeedRule};
 use std::cell::RefCell;
 use std::collections::HashMap;
 
-/// A* on a grid of the plane whose step cost is the step's duration at the speed the rule allows there;
+/// A* on a grid of the workspace whose step cost is the step's duration at the speed the rule allows there;
 /// needs the request's TEB table ([`PlanRequest::speeds`]).
 #[derive(Debug, Clone, PartialEq)]
 pub struct FastestPath {
@@ -35,8 +35,8 @@ impl Default for FastestPath {
 /// Durations are integers: microseconds.
 const TIME_SCALE: f64 = 1e6;
 
-impl RawPathPlanner for FastestPath {
-    fn plan(&mut self, request: &PlanRequest<'_>) -> Result<Vec<Point>, PlanError> {
+impl<O: Obstacle<D>, const D: usize> RawPathPlanner<O, D> for FastestPath {
+    fn plan(&mut self, request: &PlanRequest<'_, O, D>) -> Result<Vec<Point<D>>, PlanError> {
         let beta_u = match request.speeds.last() {
             Some(row) if request.speeds.iter().all(|row| row.beta.is_finite() && row.beta > 0.0) => row.beta,
             _ => return Err(PlanError::Settings("the fastest path needs the TEB table's rows, each beta > 0".into())),
@@ -48,27 +48,27 @@ impl RawPathPlanner for FastestPath {
             rule: request.rule,
             known: RefCell::default(),
         };
-        let seconds = |a: Point, b: Point| chebyshev(a, b) / speed.at(a).min(speed.at(b));
+        let seconds = |a: Point<D>, b: Point<D>| chebyshev(a, b) / speed.at(a).min(speed.at(b));
         let goal = grid.cell_of(request.goal);
         let points = grid.search(
-            |a: Cell, b: Cell| (seconds(grid.centre(a), grid.centre(b)) * TIME_SCALE) as u64,
-            |a: Cell| (chebyshev(grid.centre(a), grid.centre(goal)) / beta_u * TIME_SCALE) as u64,
+            |a: Cell<D>, b: Cell<D>| (seconds(grid.centre(a), grid.centre(b)) * TIME_SCALE) as u64,
+            |a: Cell<D>| (chebyshev(grid.centre(a), grid.centre(goal)) / beta_u * TIME_SCALE) as u64,
         )?;
         Ok(shortcut_in_time(&points, request, |a, b| segment_seconds(a, b, self.cell, &speed)))
     }
 }
 
 /// The speed the rule allows at a point, by the point's clearance, remembered per point.
-struct SpeedMap<'a> {
-    obstacles: &'a [Obstacle],
+struct SpeedMap<'a, O, const D: usize> {
+    obstacles: &'a [O],
     speeds: &'a [SpeedRow],
     rule: SpeedRule,
-    known: RefCell<HashMap<[u64; 2], f64>>,
+    known: RefCell<HashMap<[u64; D], f64>>,
 }
 
-impl SpeedMap<'_> {
+impl<O: Obstacle<D>, const D: usize> SpeedMap<'_, O, D> {
     /// The rule's `beta` at the point's clearance.
-    fn at(&self, p: Point) -> f64 {
+    fn at(&self, p: Point<D>) -> f64 {
         *self.known.borrow_mut().entry(p.map(f64::to_bits)).or_insert_with(|| {
             let gap = (!self.obstacles.is_empty()).then(|| clearance(self.obstacles, p));
             self.rule.at_clearance(self.speeds, gap).beta
@@ -78,25 +78,30 @@ impl SpeedMap<'_> {
 
 /// The larger axis displacement from `a` to `b`: a planner bounded to `beta` per axis needs this over
 /// `beta` seconds.
-fn chebyshev(a: Point, b: Point) -> f64 {
-    let d = sub(b, a);
-    d[0].abs().max(d[1].abs())
+fn chebyshev<const D: usize>(a: Point<D>, b: Point<D>) -> f64 {
+    chebyshev_norm(sub(b, a))
 }
 
 /// Seconds to cross the segment `a`-`b` in pieces of about `cell`, each at the rule's speed at its slower
 /// end.
-fn segment_seconds(a: Point, b: Point, cell: f64, speed: &SpeedMap<'_>) -> f64 {
+fn segment_seconds<O: Obstacle<D>, const D: usize>(
+    a: Point<D>,
+    b: Point<D>,
+    cell: f64,
+    speed: &SpeedMap<'_, O, D>,
+) -> f64 {
     let pieces = (chebyshev(a, b) / cell).ceil().max(1.0) as usize;
-    let at = |k: usize| {
-        let t = k as f64 / pieces as f64;
-        [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]
-    };
+    let at = |k: usize| lerp(a, b, k as f64 / pieces as f64);
     (0..pieces).map(|k| chebyshev(at(k), at(k + 1)) / speed.at(at(k)).min(speed.at(at(k + 1)))).sum()
 }
 
 /// The path shortened by line of sight where it is no slower: from each kept point, the farthest later
 /// point whose segment keeps the inflation and takes no longer than the path between them.
-fn shortcut_in_time(points: &[Point], request: &PlanRequest<'_>, seconds: impl Fn(Point, Point) -> f64) -> Vec<Point> {
+fn shortcut_in_time<O: Obstacle<D>, const D: usize>(
+    points: &[Point<D>],
+    request: &PlanRequest<'_, O, D>,
+    seconds: impl Fn(Point<D>, Point<D>) -> f64,
+) -> Vec<Point<D>> {
     // Seconds from the first point to each point along the path.
     let elapsed: Vec<f64> = std::iter::once(0.0)
         .chain(points.windows(2).scan(0.0, |total, w| {
@@ -123,6 +128,7 @@ fn shortcut_in_time(points: &[Point], request: &PlanRequest<'_>, seconds: impl F
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::PlaneObstacle;
     use crate::raw_path::{path_length, GridAStar};
 
     /// beta 0.5 / 1.0 / 1.5 with bounds 0.3 / 1.0 / 2.0: full speed needs 4 m of clearance.
@@ -130,7 +136,7 @@ mod tests {
         [(0.5, 0.3), (1.0, 1.0), (1.5, 2.0)].map(|(beta, bound)| SpeedRow { beta, bound }).to_vec()
     }
 
-    fn request<'a>(obstacles: &'a [Obstacle], speeds: &'a [SpeedRow]) -> PlanRequest<'a> {
+    fn request<'a>(obstacles: &'a [PlaneObstacle], speeds: &'a [SpeedRow]) -> PlanRequest<'a, PlaneObstacle, 2> {
         PlanRequest {
             start: [0.0, 0.0],
             goal: [20.0, 0.0],
@@ -143,7 +149,7 @@ mod tests {
     }
 
     /// Seconds along `path` at the rule's speed, finely sampled.
-    fn travel_seconds(path: &[Point], request: &PlanRequest<'_>) -> f64 {
+    fn travel_seconds(path: &[Point], request: &PlanRequest<'_, PlaneObstacle, 2>) -> f64 {
         let speed = SpeedMap {
             obstacles: request.obstacles,
             speeds: request.speeds,
@@ -165,8 +171,8 @@ mod tests {
         // Two long walls 1.6 m apart along the straight line: inside, the clearance is at most 0.8 m and the
         // rule allows beta_l; a detour 3-4 m around their ends is crossed at beta_u.
         let walls = [
-            Obstacle::Rectangle { min: [4.0, 0.8], max: [16.0, 1.0] },
-            Obstacle::Rectangle { min: [4.0, -1.0], max: [16.0, -0.8] },
+            PlaneObstacle::Rectangle { min: [4.0, 0.8], max: [16.0, 1.0] },
+            PlaneObstacle::Rectangle { min: [4.0, -1.0], max: [16.0, -0.8] },
         ];
         let speeds = table();
         let request = request(&walls, &speeds);
@@ -185,8 +191,8 @@ mod tests {
         // Walls 4.4 m apart: 2.2 m of clearance on the centre line. The paper's rule fits bounds up to 1.1 m
         // there (beta 1.0), the planner rule bounds below 2.2 m (beta 1.5).
         let walls = [
-            Obstacle::Rectangle { min: [-2.0, 2.2], max: [22.0, 2.4] },
-            Obstacle::Rectangle { min: [-2.0, -2.4], max: [22.0, -2.2] },
+            PlaneObstacle::Rectangle { min: [-2.0, 2.2], max: [22.0, 2.4] },
+            PlaneObstacle::Rectangle { min: [-2.0, -2.4], max: [22.0, -2.2] },
         ];
         let speeds = table();
         let half = request(&walls, &speeds);
@@ -201,8 +207,8 @@ mod tests {
     fn where_the_detour_costs_more_than_it_gains_the_path_goes_through() {
         // A short gap (2 m of walls) costs less at beta_l than a detour around walls 20 m long.
         let walls = [
-            Obstacle::Rectangle { min: [9.0, 0.8], max: [11.0, 11.0] },
-            Obstacle::Rectangle { min: [9.0, -11.0], max: [11.0, -0.8] },
+            PlaneObstacle::Rectangle { min: [9.0, 0.8], max: [11.0, 11.0] },
+            PlaneObstacle::Rectangle { min: [9.0, -11.0], max: [11.0, -0.8] },
         ];
         let speeds = table();
         let request = request(&walls, &speeds);
@@ -215,7 +221,7 @@ mod tests {
     #[test]
     fn without_a_table_or_with_a_blocked_goal_it_says_why() {
         assert!(matches!(FastestPath::default().plan(&request(&[], &[])), Err(PlanError::Settings(_))));
-        let on_goal = [Obstacle::Circle { center: [20.0, 0.1], radius: 0.5 }];
+        let on_goal = [PlaneObstacle::Circle { center: [20.0, 0.1], radius: 0.5 }];
         let speeds = table();
         assert!(matches!(FastestPath::default().plan(&request(&on_goal, &speeds)), Err(PlanError::GoalBlocked { .. })));
     }

@@ -33,17 +33,17 @@ pub use fastrack_proto::planner_speed::SpeedRule;
 
 pub use crate::core::{Branch, StepReport};
 
-/// How the loop runs.
+/// How the loop runs, in a `D`-axis workspace.
 #[derive(Debug, Clone, PartialEq)]
-pub struct LoopSettings {
+pub struct LoopSettings<const D: usize> {
     /// The model, by name and version (0: the server's default version).
     pub model: pb::ModelRef,
     /// Control period `dt` (s): the planner moves at most `beta_query dt` per axis per step.
     pub control_period: f64,
     /// Where the planner goes.
-    pub goal: Point,
+    pub goal: Point<D>,
     /// The workspace, `(min, max)`, for the raw-path planner.
-    pub bounds: (Point, Point),
+    pub bounds: (Point<D>, Point<D>),
     /// Reset candidates asked about per reset before the planner holds.
     pub reset_candidates: usize,
     /// The rule that picks `beta_query` (the paper's by default).
@@ -97,10 +97,10 @@ impl From<CoreError> for LoopError {
     }
 }
 
-impl LoopSettings {
+impl<const D: usize> LoopSettings<D> {
     /// Settings for `model` at `control_period` toward `goal` in `bounds`, with
     /// [`DEFAULT_RESET_CANDIDATES`] and the paper's rule.
-    pub fn new(model: pb::ModelRef, control_period: f64, goal: Point, bounds: (Point, Point)) -> Self {
+    pub fn new(model: pb::ModelRef, control_period: f64, goal: Point<D>, bounds: (Point<D>, Point<D>)) -> Self {
         Self {
             model,
             control_period,
@@ -112,7 +112,7 @@ impl LoopSettings {
     }
 
     /// The core's share of the settings.
-    pub fn core(&self) -> CoreSettings {
+    pub fn core(&self) -> CoreSettings<D> {
         CoreSettings {
             control_period: self.control_period,
             goal: self.goal,
@@ -123,16 +123,16 @@ impl LoopSettings {
     }
 }
 
-/// The online loop of one robot: [`LoopCore`]'s decisions, answered by an [`Oracle`] (by default the
-/// server, over one `Track` stream).
-pub struct OnlineLoop<O = TrackOracle> {
-    oracle: O,
-    core: LoopCore,
+/// The online loop of one robot among obstacles `O` of a `D`-axis workspace: [`LoopCore`]'s decisions,
+/// answered by an [`Oracle`] `A` (by default the server, over one `Track` stream).
+pub struct OnlineLoop<O, const D: usize, A = TrackOracle> {
+    oracle: A,
+    core: LoopCore<O, D>,
 }
 
-impl OnlineLoop<TrackOracle> {
+impl<O: Obstacle<D>, const D: usize> OnlineLoop<O, D, TrackOracle> {
     /// Opens a `Track` stream for the model and places the planner at `start` (its initial state `p_0`).
-    pub async fn start(client: &FastrackClient, settings: LoopSettings, start: Point) -> Result<Self, LoopError> {
+    pub async fn start(client: &FastrackClient, settings: LoopSettings<D>, start: Point<D>) -> Result<Self, LoopError> {
         // Settings are checked before the server is asked anything.
         let core = settings.core();
         core.check()?;
@@ -141,30 +141,30 @@ impl OnlineLoop<TrackOracle> {
     }
 }
 
-impl<O: Oracle> OnlineLoop<O> {
+impl<O: Obstacle<D>, const D: usize, A: Oracle> OnlineLoop<O, D, A> {
     /// A loop whose questions `oracle` answers, with the planner at `start` (its initial state `p_0`).
-    pub fn new(oracle: O, settings: CoreSettings, start: Point) -> Result<Self, LoopError> {
+    pub fn new(oracle: A, settings: CoreSettings<D>, start: Point<D>) -> Result<Self, LoopError> {
         let core = LoopCore::new(oracle.view().clone(), settings, start)?;
         Ok(Self { oracle, core })
     }
 
     /// The planner's current state `p`.
-    pub fn planner(&self) -> Point {
+    pub fn planner(&self) -> Point<D> {
         self.core.planner()
     }
 
     /// What is left of the raw path after the planner's state.
-    pub fn raw_path(&self) -> impl Iterator<Item = &Point> {
+    pub fn raw_path(&self) -> impl Iterator<Item = &Point<D>> {
         self.core.raw_path()
     }
 
     /// The obstacles sensed so far.
-    pub fn obstacles(&self) -> &[Obstacle] {
+    pub fn obstacles(&self) -> &[O] {
         self.core.obstacles()
     }
 
-    /// The tracker's position in the planner's plane, `Q^T s`.
-    pub fn tracker_position(&self, tracker: &[f64]) -> Point {
+    /// The tracker's position in the planner's position space, `Q^T s`.
+    pub fn tracker_position(&self, tracker: &[f64]) -> Point<D> {
         self.core.tracker_position(tracker)
     }
 
@@ -173,9 +173,9 @@ impl<O: Oracle> OnlineLoop<O> {
     pub async fn step(
         &mut self,
         tracker: &[f64],
-        sensed: &[Obstacle],
-        planner: &mut dyn RawPathPlanner,
-    ) -> Result<StepReport, LoopError> {
+        sensed: &[O],
+        planner: &mut dyn RawPathPlanner<O, D>,
+    ) -> Result<StepReport<D>, LoopError> {
         match self.decide(tracker, sensed, planner).await {
             Err(LoopError::TableMismatch { .. }) => {
                 let speeds = self.oracle.refresh().await?;
@@ -189,9 +189,9 @@ impl<O: Oracle> OnlineLoop<O> {
     async fn decide(
         &mut self,
         tracker: &[f64],
-        sensed: &[Obstacle],
-        planner: &mut dyn RawPathPlanner,
-    ) -> Result<StepReport, LoopError> {
+        sensed: &[O],
+        planner: &mut dyn RawPathPlanner<O, D>,
+    ) -> Result<StepReport<D>, LoopError> {
         let mut step = self.core.begin(tracker, sensed, planner)?;
         loop {
             let answers = self.oracle.answer(step.query()).await?;

@@ -17,7 +17,10 @@ pub trait Oracle {
     /// Answers one question: one [`Answer`] for a [`Query::Tick`], one per relative state for a
     /// [`Query::Batch`]. A tick whose `beta` the model would not choose for its `d_obs` (the table changed
     /// under the loop) fails with [`LoopError::TableMismatch`].
-    fn answer(&mut self, query: &Query) -> impl Future<Output = Result<Vec<Answer>, LoopError>> + Send;
+    fn answer<const D: usize>(
+        &mut self,
+        query: &Query<D>,
+    ) -> impl Future<Output = Result<Vec<Answer>, LoopError>> + Send;
 
     /// The model's table as it stands now, read again after a [`LoopError::TableMismatch`].
     fn refresh(&mut self) -> impl Future<Output = Result<Vec<SpeedRow>, LoopError>> + Send;

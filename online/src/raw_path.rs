@@ -1,24 +1,24 @@
 //! Raw-path planners: what the online loop asks for a path around the sensed obstacles, inflated by the
-//! sTEB. Any planner fits behind [`RawPathPlanner`]; the default is A* on a grid of the plane (the
-//! `pathfinding` crate) with the path shortened by line of sight.
+//! sTEB, in the plane or in space. Any planner fits behind [`RawPathPlanner`]; the default is A* on a grid of
+//! cells (squares or cubes; the `pathfinding` crate) with the path shortened by line of sight.
 
-use crate::geometry::{clearance, norm, segment_is_free, sub, Obstacle, Point};
+use crate::geometry::{chebyshev_norm, clearance, inside, lerp, norm, segment_is_free, sub, Obstacle, Point};
 use fastrack_proto::planner_speed::{SpeedRow, SpeedRule};
 use std::collections::VecDeque;
 
 /// What a planner is asked for.
-#[derive(Debug, Clone, Copy)]
-pub struct PlanRequest<'a> {
+#[derive(Debug)]
+pub struct PlanRequest<'a, O, const D: usize> {
     /// Where the path starts: the planner's current state.
-    pub start: Point,
+    pub start: Point<D>,
     /// Where it ends.
-    pub goal: Point,
+    pub goal: Point<D>,
     /// The obstacles sensed so far.
-    pub obstacles: &'a [Obstacle],
+    pub obstacles: &'a [O],
     /// How far the path must keep from every obstacle (the sTEB radius).
     pub inflation: f64,
     /// The workspace, `(min, max)` corners: the path stays inside.
-    pub bounds: (Point, Point),
+    pub bounds: (Point<D>, Point<D>),
     /// The TEB table the speed rule reads (slowest row first), for planners that plan for speed; others
     /// ignore it.
     pub speeds: &'a [SpeedRow],
@@ -26,14 +26,14 @@ pub struct PlanRequest<'a> {
     pub rule: SpeedRule,
 }
 
-/// A path that cannot be planned.
+/// A path that cannot be planned (its points as lists of coordinates, whatever the dimension).
 #[derive(Debug, Clone, PartialEq, thiserror::Error)]
 pub enum PlanError {
     /// The goal lies within the inflation of an obstacle or outside the workspace.
     #[error("the goal {goal:?} is not free: it lies within {inflation} m of an obstacle or outside the workspace")]
     GoalBlocked {
         /// The goal.
-        goal: Point,
+        goal: Vec<f64>,
         /// The inflation asked for.
         inflation: f64,
     },
@@ -41,9 +41,9 @@ pub enum PlanError {
     #[error("no path from {start:?} to {goal:?} keeps {inflation} m from every sensed obstacle")]
     NoPath {
         /// The start.
-        start: Point,
+        start: Vec<f64>,
         /// The goal.
-        goal: Point,
+        goal: Vec<f64>,
         /// The inflation asked for.
         inflation: f64,
     },
@@ -54,13 +54,14 @@ pub enum PlanError {
 
 /// Plans raw paths: a list of planner states from the request's start to its goal, every segment keeping
 /// more than the inflation from every obstacle (the start may lie closer: the path leaves it).
-pub trait RawPathPlanner: Send {
+pub trait RawPathPlanner<O: Obstacle<D>, const D: usize>: Send {
     /// A path from `request.start` to `request.goal`, both included.
-    fn plan(&mut self, request: &PlanRequest<'_>) -> Result<Vec<Point>, PlanError>;
+    fn plan(&mut self, request: &PlanRequest<'_, O, D>) -> Result<Vec<Point<D>>, PlanError>;
 }
 
-/// A* over the cells of a grid of the plane (8-connected, octile costs), then shortened by line of sight:
-/// from each kept point, the farthest later point whose segment is free.
+/// A* over the cells of a grid of the workspace (each cell joined to every cell it touches, 8 in the plane
+/// and 26 in space, at the length of the step), then shortened by line of sight: from each kept point, the
+/// farthest later point whose segment is free.
 #[derive(Debug, Clone, PartialEq)]
 pub struct GridAStar {
     /// Cell size (m).
@@ -79,8 +80,8 @@ const MAX_CELLS_PER_SIDE: f64 = 1_048_576.0;
 /// Grid costs are integers: micrometres.
 const COST_SCALE: f64 = 1e6;
 
-impl RawPathPlanner for GridAStar {
-    fn plan(&mut self, request: &PlanRequest<'_>) -> Result<Vec<Point>, PlanError> {
+impl<O: Obstacle<D>, const D: usize> RawPathPlanner<O, D> for GridAStar {
+    fn plan(&mut self, request: &PlanRequest<'_, O, D>) -> Result<Vec<Point<D>>, PlanError> {
         let grid = CellGrid::new(request, self.cell)?;
         let goal = grid.cell_of(request.goal);
         let points = grid.search(|a, b| grid.octile(a, b), |a| grid.octile(a, goal))?;
@@ -88,66 +89,71 @@ impl RawPathPlanner for GridAStar {
     }
 }
 
-/// A cell of a [`CellGrid`]: column and row.
-pub(crate) type Cell = (i64, i64);
+/// A cell of a [`CellGrid`]: its index along each axis.
+pub(crate) type Cell<const D: usize> = [i64; D];
 
 /// The grid one request is searched on: cells of the workspace, their centres, and the steps allowed
 /// between neighbours (keeping the inflation, or leaving a start within it by gaining clearance).
-pub(crate) struct CellGrid<'r> {
-    request: &'r PlanRequest<'r>,
+pub(crate) struct CellGrid<'r, O, const D: usize> {
+    request: &'r PlanRequest<'r, O, D>,
     cell: f64,
-    columns: i64,
-    rows: i64,
+    /// Cells along each axis.
+    counts: [i64; D],
+    /// The offsets to the cells a cell touches.
+    neighbours: Vec<[i64; D]>,
 }
 
-impl<'r> CellGrid<'r> {
+impl<'r, O: Obstacle<D>, const D: usize> CellGrid<'r, O, D> {
     /// The grid of `request` with cells of `cell` metres, after checking the settings and the goal.
-    pub(crate) fn new(request: &'r PlanRequest<'r>, cell: f64) -> Result<Self, PlanError> {
+    pub(crate) fn new(request: &'r PlanRequest<'r, O, D>, cell: f64) -> Result<Self, PlanError> {
         if !(cell.is_finite() && cell > 0.0) {
             return Err(PlanError::Settings(format!("cell = {cell}; must be a finite size > 0")));
         }
         let (lo, hi) = request.bounds;
         let span = |axis: usize| ((hi[axis] - lo[axis]) / cell).ceil();
-        if !(0..2).all(|axis| span(axis) >= 0.0 && span(axis) <= MAX_CELLS_PER_SIDE) {
+        if !(0..D).all(|axis| span(axis) >= 0.0 && span(axis) <= MAX_CELLS_PER_SIDE) {
             return Err(PlanError::Settings(format!(
                 "the bounds {lo:?}..{hi:?} span more than {MAX_CELLS_PER_SIDE} cells of {cell} m a side (or are not finite)"
             )));
         }
-        let grid = Self { request, cell, columns: span(0) as i64 + 1, rows: span(1) as i64 + 1 };
+        let neighbours = (0..3i64.pow(D as u32))
+            .map(|k| std::array::from_fn(|axis| (k / 3i64.pow(axis as u32)) % 3 - 1))
+            .filter(|offset: &[i64; D]| offset.iter().any(|&o| o != 0))
+            .collect();
+        let grid = Self { request, cell, counts: std::array::from_fn(|axis| span(axis) as i64 + 1), neighbours };
         if !grid.free(request.goal) {
-            return Err(PlanError::GoalBlocked { goal: request.goal, inflation: request.inflation });
+            return Err(PlanError::GoalBlocked { goal: request.goal.to_vec(), inflation: request.inflation });
         }
         Ok(grid)
     }
 
     /// The cell's centre.
-    pub(crate) fn centre(&self, (i, j): Cell) -> Point {
+    pub(crate) fn centre(&self, cell: Cell<D>) -> Point<D> {
         let lo = self.request.bounds.0;
-        [lo[0] + i as f64 * self.cell, lo[1] + j as f64 * self.cell]
+        std::array::from_fn(|axis| lo[axis] + cell[axis] as f64 * self.cell)
     }
 
     /// The cell whose centre is nearest `p`.
-    pub(crate) fn cell_of(&self, p: Point) -> Cell {
+    pub(crate) fn cell_of(&self, p: Point<D>) -> Cell<D> {
         let lo = self.request.bounds.0;
-        (((p[0] - lo[0]) / self.cell).round() as i64, ((p[1] - lo[1]) / self.cell).round() as i64)
+        std::array::from_fn(|axis| ((p[axis] - lo[axis]) / self.cell).round() as i64)
     }
 
     /// Inside the workspace.
-    fn inside(&self, p: Point) -> bool {
-        let (lo, hi) = self.request.bounds;
-        p[0] >= lo[0] && p[0] <= hi[0] && p[1] >= lo[1] && p[1] <= hi[1]
+    fn inside(&self, p: Point<D>) -> bool {
+        inside(p, self.request.bounds)
     }
 
     /// Inside the workspace and farther than the inflation from every obstacle.
-    fn free(&self, p: Point) -> bool {
+    fn free(&self, p: Point<D>) -> bool {
         self.inside(p) && clearance(self.request.obstacles, p) > self.request.inflation
     }
 
     /// Whether the step from cell `a` to its neighbour `b` is allowed: between free cells (or onto the goal)
     /// along a segment that keeps the inflation; from a cell within the inflation (the planner's cell rounded
     /// towards an obstacle, or a planner the map grew around), only a step that strictly gains clearance.
-    fn step_free(&self, a: Cell, b: Cell) -> bool {
-        if !(b.0 >= 0 && b.1 >= 0 && b.0 < self.columns && b.1 < self.rows) {
+    fn step_free(&self, a: Cell<D>, b: Cell<D>) -> bool {
+        if !(0..D).all(|axis| b[axis] >= 0 && b[axis] < self.counts[axis]) {
             return false;
         }
         let (obstacles, inflation) = (self.request.obstacles, self.request.inflation);
@@ -161,35 +167,44 @@ impl<'r> CellGrid<'r> {
         }
     }
 
-    /// The octile distance between two cells, in integer cost units.
-    pub(crate) fn octile(&self, a: Cell, b: Cell) -> u64 {
-        let (dx, dy) = ((a.0 - b.0).abs() as f64, (a.1 - b.1).abs() as f64);
-        ((dx.max(dy) + (std::f64::consts::SQRT_2 - 1.0) * dx.min(dy)) * self.cell * COST_SCALE) as u64
+    /// The length of the shortest path of steps between touching cells from `a` to `b` (the octile distance
+    /// in the plane), in integer cost units: with the axis gaps sorted largest first, `g_k` steps along `k + 1`
+    /// axes at once cost `sqrt(k + 1)` cells each, where `g_k` is the k-th gap less the next.
+    pub(crate) fn octile(&self, a: Cell<D>, b: Cell<D>) -> u64 {
+        let mut gaps: [f64; D] = std::array::from_fn(|axis| (a[axis] - b[axis]).abs() as f64);
+        gaps.sort_by(|x, y| y.total_cmp(x));
+        let cells: f64 =
+            (0..D).map(|k| (gaps[k] - gaps.get(k + 1).copied().unwrap_or(0.0)) * ((k + 1) as f64).sqrt()).sum();
+        (cells * self.cell * COST_SCALE) as u64
     }
 
     /// A* over the allowed steps, each costing `step_cost(a, b)`, with the admissible `heuristic`: the path
     /// of cell centres, its first point the request's start and its last the goal.
     pub(crate) fn search(
         &self,
-        step_cost: impl Fn(Cell, Cell) -> u64,
-        heuristic: impl Fn(Cell) -> u64,
-    ) -> Result<Vec<Point>, PlanError> {
+        step_cost: impl Fn(Cell<D>, Cell<D>) -> u64,
+        heuristic: impl Fn(Cell<D>) -> u64,
+    ) -> Result<Vec<Point<D>>, PlanError> {
         let request = self.request;
         let (start, goal) = (self.cell_of(request.start), self.cell_of(request.goal));
-        let successors = |&a: &Cell| {
-            let mut next = Vec::with_capacity(8);
-            for (di, dj) in [(-1, -1), (-1, 0), (-1, 1), (0, -1), (0, 1), (1, -1), (1, 0), (1, 1)] {
-                let b = (a.0 + di, a.1 + dj);
+        let successors = |&a: &Cell<D>| {
+            let mut next = Vec::with_capacity(self.neighbours.len());
+            for offset in &self.neighbours {
+                let b = std::array::from_fn(|axis| a[axis] + offset[axis]);
                 if self.step_free(a, b) {
                     next.push((b, step_cost(a, b)));
                 }
             }
             next
         };
-        let no_path = || PlanError::NoPath { start: request.start, goal: request.goal, inflation: request.inflation };
+        let no_path = || PlanError::NoPath {
+            start: request.start.to_vec(),
+            goal: request.goal.to_vec(),
+            inflation: request.inflation,
+        };
         let (cells, _) = pathfinding::directed::astar::astar(&start, successors, |a| heuristic(*a), |&a| a == goal)
             .ok_or_else(no_path)?;
-        let mut points: Vec<Point> = cells.iter().map(|&c| self.centre(c)).collect();
+        let mut points: Vec<Point<D>> = cells.iter().map(|&c| self.centre(c)).collect();
         points[0] = request.start;
         *points.last_mut().expect("a path holds its goal") = request.goal;
         Ok(points)
@@ -198,7 +213,7 @@ impl<'r> CellGrid<'r> {
 
 /// The path shortened by line of sight: from each kept point, the farthest later point whose segment keeps
 /// the inflation from every obstacle (the next point always qualifies, as the path's segments do).
-pub fn shortcut(points: &[Point], obstacles: &[Obstacle], inflation: f64) -> Vec<Point> {
+pub fn shortcut<O: Obstacle<D>, const D: usize>(points: &[Point<D>], obstacles: &[O], inflation: f64) -> Vec<Point<D>> {
     let mut kept = vec![points[0]];
     let mut i = 0;
     while i + 1 < points.len() {
@@ -214,36 +229,34 @@ pub fn shortcut(points: &[Point], obstacles: &[Obstacle], inflation: f64) -> Vec
 
 /// Moves a planner at `p` along `path` (the states ahead of it, consumed as they are reached) for one
 /// control period at per-axis speed at most `beta`, where `budget = beta dt`: a segment of direction `d` is
-/// crossed at speed `beta / max(|d_x|, |d_y|)`, so neither axis moves more than `budget`. Returns the new
-/// state (the last one when the path runs out).
-pub fn advance_along(p: Point, path: &mut VecDeque<Point>, budget: f64) -> Point {
+/// crossed at speed `beta / max_i |d_i|`, so no axis moves more than `budget`. Returns the new state (the
+/// last one when the path runs out).
+pub fn advance_along<const D: usize>(p: Point<D>, path: &mut VecDeque<Point<D>>, budget: f64) -> Point<D> {
     let (mut p, mut remaining) = (p, budget);
     while let Some(&next) = path.front() {
-        let delta = sub(next, p);
-        let per_axis = delta[0].abs().max(delta[1].abs());
+        let per_axis = chebyshev_norm(sub(next, p));
         if per_axis <= remaining {
             remaining -= per_axis;
             p = next;
             path.pop_front();
         } else {
-            let t = remaining / per_axis;
-            return [p[0] + t * delta[0], p[1] + t * delta[1]];
+            return lerp(p, next, remaining / per_axis);
         }
     }
     p
 }
 
 /// The length of a path.
-pub fn path_length(points: &[Point]) -> f64 {
+pub fn path_length<const D: usize>(points: &[Point<D>]) -> f64 {
     points.windows(2).map(|w| norm(sub(w[1], w[0]))).sum()
 }
 
 #[cfg(test)]
 mod tests {
     use super::*;
-    use crate::geometry::{clearance, segment_is_free};
+    use crate::geometry::{clearance, segment_is_free, PlaneObstacle, SpaceObstacle};
 
-    fn request<'a>(obstacles: &'a [Obstacle], inflation: f64) -> PlanRequest<'a> {
+    fn request<'a>(obstacles: &'a [PlaneObstacle], inflation: f64) -> PlanRequest<'a, PlaneObstacle, 2> {
         PlanRequest {
             start: [0.0, 0.0],
             goal: [10.0, 0.0],
@@ -263,7 +276,7 @@ mod tests {
 
     #[test]
     fn the_path_goes_around_an_obstacle_keeping_the_inflation() {
-        let obstacles = [Obstacle::Circle { center: [5.0, 0.0], radius: 1.0 }];
+        let obstacles = [PlaneObstacle::Circle { center: [5.0, 0.0], radius: 1.0 }];
         let path = GridAStar::default().plan(&request(&obstacles, 0.5)).unwrap();
         for segment in path.windows(2) {
             assert!(segment_is_free(&obstacles, segment[0], segment[1], 0.5), "{segment:?} cuts the inflated disc");
@@ -292,7 +305,7 @@ mod tests {
     #[test]
     fn a_start_within_the_inflation_is_left_by_gaining_clearance() {
         // The start lies 0.3 m from the disc, inside the 0.5 m inflation: the path leaves it, never closing in.
-        let obstacles = [Obstacle::Circle { center: [0.0, -1.3], radius: 1.0 }];
+        let obstacles = [PlaneObstacle::Circle { center: [0.0, -1.3], radius: 1.0 }];
         let path = GridAStar::default().plan(&request(&obstacles, 0.5)).unwrap();
         assert_eq!(path[0], [0.0, 0.0]);
         let closest = path.windows(2).map(|w| obstacles[0].segment_distance(w[0], w[1])).fold(f64::INFINITY, f64::min);
@@ -305,11 +318,39 @@ mod tests {
 
     #[test]
     fn a_wall_across_the_workspace_or_a_blocked_goal_is_reported() {
-        let wall = [Obstacle::Wall { from: [5.0, -7.0], to: [5.0, 7.0], thickness: 0.2 }];
+        let wall = [PlaneObstacle::Wall { from: [5.0, -7.0], to: [5.0, 7.0], thickness: 0.2 }];
         assert!(matches!(GridAStar::default().plan(&request(&wall, 0.3)), Err(PlanError::NoPath { .. })));
-        let on_goal = [Obstacle::Circle { center: [10.0, 0.2], radius: 0.5 }];
+        let on_goal = [PlaneObstacle::Circle { center: [10.0, 0.2], radius: 0.5 }];
         assert!(matches!(GridAStar::default().plan(&request(&on_goal, 0.3)), Err(PlanError::GoalBlocked { .. })));
         assert!(matches!(GridAStar { cell: 0.0 }.plan(&request(&[], 0.3)), Err(PlanError::Settings(_))));
+    }
+
+    #[test]
+    fn in_space_the_path_climbs_over_a_low_block_keeping_the_inflation() {
+        // A block 6 m wide and 1.5 m high across the straight line: over it is shorter than around it.
+        let obstacles = [
+            SpaceObstacle::Box { min: [4.0, -3.0, -1.0], max: [6.0, 3.0, 1.5] },
+            SpaceObstacle::Floor { height: -1.0 },
+        ];
+        let request = PlanRequest {
+            start: [0.0, 0.0, 0.5],
+            goal: [10.0, 0.0, 0.5],
+            obstacles: &obstacles,
+            inflation: 0.3,
+            bounds: ([-1.0, -4.0, -0.5], [11.0, 4.0, 3.0]),
+            speeds: &[],
+            rule: SpeedRule::HalfDistance,
+        };
+        let path = GridAStar { cell: 0.25 }.plan(&request).unwrap();
+        assert_eq!((path[0], *path.last().unwrap()), (request.start, request.goal));
+        for segment in path.windows(2) {
+            assert!(segment_is_free(&obstacles, segment[0], segment[1], 0.3), "{segment:?} cuts the inflated block");
+        }
+        let top = path.iter().map(|p| p[2]).fold(f64::NEG_INFINITY, f64::max);
+        assert!(top > 1.8, "the path does not go over the block: {path:?}");
+        // Over the top: at least 10 m plus the climb of 1.3 m each way; around a side: more than 14 m.
+        let length = path_length(&path);
+        assert!(length > 10.3 && length < 13.0, "length {length}: {path:?}");
     }
 
     #[test]

@@ -3,7 +3,6 @@
 //! state), and `GetModel` gives the table.
 
 use crate::core::{Answer, CoreError, ModelView, Query};
-use crate::geometry::Point;
 use crate::online_loop::LoopError;
 use crate::oracle::Oracle;
 use fastrack_client::{pb, FastrackClient, TrackStream};
@@ -16,7 +15,7 @@ const FLAG: pb::OutOfDomainPolicy = pb::OutOfDomainPolicy::Flag;
 pub fn track_tick(
     seq: u64,
     tracker: &[f64],
-    planner: &Point,
+    planner: &[f64],
     d_obs: Option<f64>,
     planner_clearance: Option<f64>,
 ) -> pb::TrackTick {
@@ -41,21 +40,15 @@ pub fn certificate_horizon(info: &pb::ModelInfo) -> Option<f64> {
     info.teb_table.iter().filter_map(|row| row.verification.as_ref().map(|v| v.horizon)).reduce(f64::min)
 }
 
-/// The model as the core reads it, from its description; the online loop plans in the plane, so the
-/// model's planner must be 2-D.
-pub fn model_view(info: &pb::ModelInfo) -> Result<ModelView, LoopError> {
-    if info.planner_dim != 2 {
-        return Err(LoopError::Core(CoreError::Setup(format!(
-            "model {} has a {}-D planner; the online loop plans in the plane (2-D planners)",
-            info.name, info.planner_dim
-        ))));
-    }
-    Ok(ModelView {
+/// The model as the core reads it, from its description (the core checks that its planner's dimension is
+/// the loop's).
+pub fn model_view(info: &pb::ModelInfo) -> ModelView {
+    ModelView {
         speeds: info.teb_table.iter().map(SpeedRow::from).collect(),
         planner_to_state: info.planner_to_state.clone(),
         n_state: info.state.len(),
         certificate_horizon: certificate_horizon(info),
-    })
+    }
 }
 
 /// One `TrackingControl` call for the relative states `states` (row-major, `n_state` each) under `beta`
@@ -104,7 +97,7 @@ impl TrackOracle {
     /// Fetches the model's description and opens a `Track` stream for it.
     pub async fn open(client: &FastrackClient, model: pb::ModelRef) -> Result<Self, LoopError> {
         let info = client.get_model(model.clone()).await?;
-        let view = model_view(&info)?;
+        let view = model_view(&info);
         let stream = client.track(model.clone(), 0.0).await?;
         Ok(Self { client: client.clone(), stream, model, view, n_params: info.params.len(), seq: 0 })
     }
@@ -116,7 +109,7 @@ impl Oracle for TrackOracle {
     }
 
     /// A tick on the stream (its `beta_query` checked against the core's), or one `TrackingControl` batch.
-    async fn answer(&mut self, query: &Query) -> Result<Vec<Answer>, LoopError> {
+    async fn answer<const D: usize>(&mut self, query: &Query<D>) -> Result<Vec<Answer>, LoopError> {
         match query {
             Query::Tick { tracker, planner, d_obs, planner_clearance, beta } => {
                 let seq = self.seq;
@@ -140,7 +133,7 @@ impl Oracle for TrackOracle {
 
     async fn refresh(&mut self) -> Result<Vec<SpeedRow>, LoopError> {
         let info = self.client.get_model(self.model.clone()).await?;
-        self.view = model_view(&info)?;
+        self.view = model_view(&info);
         Ok(self.view.speeds.clone())
     }
 }

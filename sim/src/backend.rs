@@ -83,7 +83,7 @@ impl Oracle for BackendOracle {
         }
     }
 
-    async fn answer(&mut self, query: &Query) -> Result<Vec<Answer>, LoopError> {
+    async fn answer<const D: usize>(&mut self, query: &Query<D>) -> Result<Vec<Answer>, LoopError> {
         match self {
             BackendOracle::Track(oracle) => oracle.answer(query).await,
             #[cfg(feature = "in-process")]

@@ -44,7 +44,7 @@ impl LocalModel {
 
     /// An oracle for one robot.
     pub fn oracle(&self) -> Result<LocalOracle, LoopError> {
-        Ok(LocalOracle { view: model_view(&self.model.info)?, local: self.clone() })
+        Ok(LocalOracle { view: model_view(&self.model.info), local: self.clone() })
     }
 
     /// Value, membership, domain and control of the relative states `states` (row-major) under `beta`, as
@@ -82,7 +82,7 @@ impl Oracle for LocalOracle {
         &self.view
     }
 
-    async fn answer(&mut self, query: &Query) -> Result<Vec<Answer>, LoopError> {
+    async fn answer<const D: usize>(&mut self, query: &Query<D>) -> Result<Vec<Answer>, LoopError> {
         match query {
             Query::Tick { tracker, planner, d_obs, planner_clearance, beta } => {
                 let tick = track_tick(0, tracker, planner, *d_obs, *planner_clearance);

@@ -5,7 +5,7 @@
 use crate::episode::Run;
 use crate::world::World;
 use fastrack_lab::plot::{fonts_available, line_chart, Chart, Series};
-use fastrack_online::geometry::{Obstacle, Point};
+use fastrack_online::geometry::{Obstacle, PlaneObstacle, Point};
 use plotters::coord::types::RangedCoordf64;
 use plotters::prelude::*;
 use std::path::Path;
@@ -43,13 +43,13 @@ fn circle(centre: Point, radius: f64, n: usize) -> Vec<(f64, f64)> {
 }
 
 /// The outline of an obstacle as a polygon.
-fn outline(obstacle: &Obstacle) -> Vec<(f64, f64)> {
+fn outline(obstacle: &PlaneObstacle) -> Vec<(f64, f64)> {
     match obstacle {
-        Obstacle::Circle { center, radius } => circle(*center, *radius, 48),
-        Obstacle::Rectangle { min, max } => {
+        PlaneObstacle::Circle { center, radius } => circle(*center, *radius, 48),
+        PlaneObstacle::Rectangle { min, max } => {
             vec![(min[0], min[1]), (max[0], min[1]), (max[0], max[1]), (min[0], max[1])]
         }
-        Obstacle::Wall { from, to, thickness } => {
+        PlaneObstacle::Wall { from, to, thickness } => {
             let (dx, dy) = (to[0] - from[0], to[1] - from[1]);
             let length = dx.hypot(dy).max(1e-12);
             let (nx, ny) = (-dy / length * thickness / 2.0, dx / length * thickness / 2.0);
@@ -64,7 +64,7 @@ fn outline(obstacle: &Obstacle) -> Vec<(f64, f64)> {
 }
 
 /// Obstacles of `world` some sample of `run` came within sensing range of.
-fn ever_sensed<'a>(world: &'a World, run: &Run) -> Vec<&'a Obstacle> {
+fn ever_sensed<'a>(world: &'a World, run: &Run) -> Vec<&'a PlaneObstacle> {
     world
         .obstacles
         .iter()
@@ -78,7 +78,7 @@ fn ever_sensed<'a>(world: &'a World, run: &Run) -> Vec<&'a Obstacle> {
 fn draw_world<DB: DrawingBackend>(
     chart: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
     world: &World,
-    sensed: &[&Obstacle],
+    sensed: &[&PlaneObstacle],
 ) -> Result<(), String> {
     for obstacle in &world.obstacles {
         let colour = if sensed.contains(&obstacle) { SENSED } else { UNSENSED };
@@ -161,7 +161,7 @@ pub fn methods_on_one_world(path: &Path, world: &World, runs: &[&Run]) -> Result
     let text = fonts_available();
     let root = BitMapBackend::new(path, (1100, 760)).into_drawing_area();
     let mut chart = world_chart(&root, world, "every method through one world", text)?;
-    let sensed: Vec<&Obstacle> = runs.iter().flat_map(|r| ever_sensed(world, r)).collect();
+    let sensed: Vec<&PlaneObstacle> = runs.iter().flat_map(|r| ever_sensed(world, r)).collect();
     draw_world(&mut chart, world, &sensed)?;
     for (i, run) in runs.iter().enumerate() {
         let colour = METHOD_COLOURS[i % METHOD_COLOURS.len()];

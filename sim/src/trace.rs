@@ -9,7 +9,7 @@
 //! asked, the certified-set membership and the certificate's age.
 
 use fastrack_online::core::StepReport;
-use fastrack_online::geometry::{Obstacle, Point};
+use fastrack_online::geometry::{PlaneObstacle, Point};
 use fastrack_online::online_loop::Branch;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
@@ -46,7 +46,7 @@ pub struct TraceStep {
     /// The tracker state at the period's start.
     pub tracker: Vec<f64>,
     /// Obstacles sensed for the first time at this period.
-    pub sensed: Vec<Obstacle>,
+    pub sensed: Vec<PlaneObstacle>,
     /// adjustPlannerControl's branch.
     pub branch: Branch,
     /// The `beta` in force before the step.
@@ -69,7 +69,7 @@ pub struct TraceStep {
 
 impl TraceStep {
     /// The step of `report`, given `tracker` and the newly sensed `sensed`.
-    pub fn new(tracker: &[f64], sensed: Vec<Obstacle>, report: &StepReport) -> Self {
+    pub fn new(tracker: &[f64], sensed: Vec<PlaneObstacle>, report: &StepReport<2>) -> Self {
         Self {
             tracker: tracker.to_vec(),
             sensed,

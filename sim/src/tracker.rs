@@ -1,7 +1,7 @@
 //! The tracker's true dynamics, from the shared system definition, integrated by RK4 with the control held
 //! over each control period and checked at every sub-step; and the range sensor.
 
-use fastrack_online::geometry::{Obstacle, Point};
+use fastrack_online::geometry::{Obstacle, PlaneObstacle, Point};
 use fastrack_valuefn::simulation::rk4;
 use fastrack_valuefn::system::{AffineSystem, Factor, StateSpace};
 use rand::rngs::StdRng;
@@ -142,7 +142,7 @@ pub struct RangeSensor {
 
 impl RangeSensor {
     /// The obstacles of `world` within range of `position`.
-    pub fn sense(&self, obstacles: &[Obstacle], position: Point) -> Vec<Obstacle> {
+    pub fn sense(&self, obstacles: &[PlaneObstacle], position: Point) -> Vec<PlaneObstacle> {
         obstacles.iter().filter(|o| o.distance(position) <= self.range).cloned().collect()
     }
 }
@@ -176,8 +176,8 @@ mod tests {
     #[test]
     fn the_sensor_sees_what_is_in_range() {
         let obstacles = [
-            Obstacle::Circle { center: [3.0, 0.0], radius: 1.0 },
-            Obstacle::Circle { center: [10.0, 0.0], radius: 1.0 },
+            PlaneObstacle::Circle { center: [3.0, 0.0], radius: 1.0 },
+            PlaneObstacle::Circle { center: [10.0, 0.0], radius: 1.0 },
         ];
         let sensed = RangeSensor { range: 2.5 }.sense(&obstacles, [0.0, 0.0]);
         assert_eq!(sensed, vec![obstacles[0].clone()]);

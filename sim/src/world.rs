@@ -1,7 +1,7 @@
 //! 2-D worlds: a workspace, a start and a goal, and obstacles (circles, rectangles, walls), read from TOML or
 //! JSON or generated from a seed; checked to be feasible for the sTEB-inflated map.
 
-use fastrack_online::geometry::{clearance, norm, sub, Obstacle, Point};
+use fastrack_online::geometry::{clearance, norm, sub, Obstacle, PlaneObstacle, Point};
 use fastrack_online::raw_path::{GridAStar, PlanRequest, RawPathPlanner};
 use fastrack_proto::planner_speed::SpeedRule;
 use rand::rngs::StdRng;
@@ -34,7 +34,7 @@ pub struct World {
     pub goal_radius: f64,
     /// The obstacles.
     #[serde(default)]
-    pub obstacles: Vec<Obstacle>,
+    pub obstacles: Vec<PlaneObstacle>,
 }
 
 fn default_start_speed() -> f64 {
@@ -346,11 +346,11 @@ impl WorldSpec {
     }
 
     /// The obstacles of one draw (the pop-up family's before its pop-ups).
-    fn obstacles(&self, rng: &mut StdRng) -> Vec<Obstacle> {
+    fn obstacles(&self, rng: &mut StdRng) -> Vec<PlaneObstacle> {
         let size = self.size;
         let (lo, hi) = self.size_range;
         let count = |density: f64| (density * size[0] * size[1] / 100.0).round() as usize;
-        let scattered = |rng: &mut StdRng, density: f64, range: (f64, f64)| -> Vec<Obstacle> {
+        let scattered = |rng: &mut StdRng, density: f64, range: (f64, f64)| -> Vec<PlaneObstacle> {
             (0..count(density)).map(|_| random_obstacle(rng, size, range)).collect()
         };
         match self.family {
@@ -366,8 +366,9 @@ impl WorldSpec {
                     let gap = 2.0 * self.inflation + rng.random_range(0.6..1.2);
                     let low = rng.random_range(1.0..(size[1] - 1.0 - gap).max(1.0 + f64::EPSILON));
                     let half = 0.15;
-                    obstacles.push(Obstacle::Rectangle { min: [x - half, -1.0], max: [x + half, low] });
-                    obstacles.push(Obstacle::Rectangle { min: [x - half, low + gap], max: [x + half, size[1] + 1.0] });
+                    obstacles.push(PlaneObstacle::Rectangle { min: [x - half, -1.0], max: [x + half, low] });
+                    obstacles
+                        .push(PlaneObstacle::Rectangle { min: [x - half, low + gap], max: [x + half, size[1] + 1.0] });
                 }
                 obstacles
             }
@@ -395,7 +396,8 @@ impl WorldSpec {
         while placed.len() < wanted && s < total - 3.0 {
             let point = point_at(&path, &along, s);
             let offset = rng.random_range(-0.3..0.3);
-            let popup = Obstacle::Circle { center: [point[0], point[1] + offset], radius: rng.random_range(0.4..1.0) };
+            let popup =
+                PlaneObstacle::Circle { center: [point[0], point[1] + offset], radius: rng.random_range(0.4..1.0) };
             // Out of the sensor's reach at the start, whatever the path's detours.
             if popup.distance(world.start) > self.popup_beyond {
                 placed.push(popup);
@@ -432,20 +434,20 @@ fn point_at(path: &[Point], along: &[f64], s: f64) -> Point {
     [a[0] + t * (b[0] - a[0]), a[1] + t * (b[1] - a[1])]
 }
 
-fn random_obstacle(rng: &mut StdRng, size: Point, (lo, hi): (f64, f64)) -> Obstacle {
+fn random_obstacle(rng: &mut StdRng, size: Point, (lo, hi): (f64, f64)) -> PlaneObstacle {
     let center = [rng.random_range(0.0..size[0]), rng.random_range(0.0..size[1])];
     let extent = rng.random_range(lo..=hi);
     match rng.random_range(0..3) {
-        0 => Obstacle::Circle { center, radius: extent },
+        0 => PlaneObstacle::Circle { center, radius: extent },
         1 => {
             let aspect: f64 = rng.random_range(0.5..2.0);
             let (hx, hy) = (extent * aspect.sqrt(), extent / aspect.sqrt());
-            Obstacle::Rectangle { min: [center[0] - hx, center[1] - hy], max: [center[0] + hx, center[1] + hy] }
+            PlaneObstacle::Rectangle { min: [center[0] - hx, center[1] - hy], max: [center[0] + hx, center[1] + hy] }
         }
         _ => {
             let angle = rng.random_range(0.0..std::f64::consts::PI);
             let (dx, dy) = (2.0 * extent * angle.cos(), 2.0 * extent * angle.sin());
-            Obstacle::Wall {
+            PlaneObstacle::Wall {
                 from: [center[0] - dx, center[1] - dy],
                 to: [center[0] + dx, center[1] + dy],
                 thickness: rng.random_range(0.1..0.3),
@@ -551,9 +553,9 @@ radius = 1.0
                     }
                     WorldFamily::Narrow => {
                         // 3 walls of two rectangles each, across the whole height but for one gap.
-                        let walls: Vec<&Obstacle> = world.obstacles[n - 6..].iter().collect();
+                        let walls: Vec<&PlaneObstacle> = world.obstacles[n - 6..].iter().collect();
                         for pair in walls.chunks(2) {
-                            let (Obstacle::Rectangle { max: low, .. }, Obstacle::Rectangle { min: high, .. }) =
+                            let (PlaneObstacle::Rectangle { max: low, .. }, PlaneObstacle::Rectangle { min: high, .. }) =
                                 (pair[0], pair[1])
                             else {
                                 panic!("a wall is two rectangles: {pair:?}");
@@ -591,11 +593,11 @@ radius = 1.0
 
     /// The size the generator drew an obstacle at: a circle's radius, the geometric mean of a rectangle's
     /// half sides, a quarter of a wall's length.
-    fn size_of(obstacle: &Obstacle) -> f64 {
+    fn size_of(obstacle: &PlaneObstacle) -> f64 {
         match obstacle {
-            Obstacle::Circle { radius, .. } => *radius,
-            Obstacle::Rectangle { min, max } => 0.5 * ((max[0] - min[0]) * (max[1] - min[1])).sqrt(),
-            Obstacle::Wall { from, to, .. } => 0.25 * norm(sub(*to, *from)),
+            PlaneObstacle::Circle { radius, .. } => *radius,
+            PlaneObstacle::Rectangle { min, max } => 0.5 * ((max[0] - min[0]) * (max[1] - min[1])).sqrt(),
+            PlaneObstacle::Wall { from, to, .. } => 0.25 * norm(sub(*to, *from)),
         }
     }
 }

@@ -7,16 +7,16 @@
 use fastrack_client::{model_ref, pb, FastrackClient};
 use fastrack_e2e::TestServer;
 use fastrack_online::core::CoreError;
-use fastrack_online::geometry::{clearance, Obstacle};
+use fastrack_online::geometry::{clearance, PlaneObstacle};
 use fastrack_online::online_loop::{Branch, LoopError, LoopSettings, OnlineLoop};
-use fastrack_online::raw_path::GridAStar;
+use fastrack_online::raw_path::{GridAStar, PlanError, PlanRequest, RawPathPlanner};
 use std::f64::consts::FRAC_PI_2;
 use std::path::Path;
 
 /// dubins4d heading along +x (`x' = v sin theta`).
 const ALONG_X: f64 = FRAC_PI_2;
 
-fn settings() -> LoopSettings {
+fn settings() -> LoopSettings<2> {
     let field = ([-2.0, -6.0], [12.0, 6.0]);
     LoopSettings { reset_candidates: 64, ..LoopSettings::new(model_ref("dubins4d", 0), 0.1, [10.0, 0.0], field) }
 }
@@ -28,7 +28,7 @@ async fn shipped_server() -> (TestServer, FastrackClient) {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_planner_advances_at_most_beta_dt_per_axis() {
     let (_server, client) = shipped_server().await;
-    let mut online = OnlineLoop::start(&client, settings(), [0.0, 0.0]).await.unwrap();
+    let mut online = OnlineLoop::<PlaneObstacle, 2>::start(&client, settings(), [0.0, 0.0]).await.unwrap();
     let mut planner = GridAStar::default();
     let first = online.step(&[0.0, 0.0, ALONG_X, 1.0], &[], &mut planner).await.unwrap();
     assert_eq!((first.branch, first.replanned, first.round_trips), (Branch::Advance, true, 1));
@@ -36,7 +36,9 @@ async fn the_planner_advances_at_most_beta_dt_per_axis() {
     assert!((first.planner[0] - 0.125).abs() < 1e-12 && first.planner[1] == 0.0, "{:?}", first.planner);
     // A goal off the axis: the straight path moves both axes, the larger one at exactly beta dt.
     let mut diagonal =
-        OnlineLoop::start(&client, LoopSettings { goal: [6.0, 3.0], ..settings() }, [0.0, 0.0]).await.unwrap();
+        OnlineLoop::<PlaneObstacle, 2>::start(&client, LoopSettings { goal: [6.0, 3.0], ..settings() }, [0.0, 0.0])
+            .await
+            .unwrap();
     let step = diagonal.step(&[0.0, 0.0, ALONG_X, 1.0], &[], &mut planner).await.unwrap();
     assert!((step.planner[0] - 0.125).abs() < 1e-12 && (step.planner[1] - 0.0625).abs() < 1e-12, "{:?}", step.planner);
     assert_eq!(step.control.len(), 2);
@@ -48,12 +50,12 @@ async fn the_planner_advances_at_most_beta_dt_per_axis() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_drop_in_beta_keeps_p_star_when_the_tracker_is_inside_the_smaller_bound() {
     let (_server, client) = shipped_server().await;
-    let mut online = OnlineLoop::start(&client, settings(), [0.0, 0.0]).await.unwrap();
+    let mut online = OnlineLoop::<PlaneObstacle, 2>::start(&client, settings(), [0.0, 0.0]).await.unwrap();
     let mut planner = GridAStar::default();
     let tracker = [0.0, 0.0, ALONG_X, 1.0];
     online.step(&tracker, &[], &mut planner).await.unwrap();
     // An obstacle 2.5 m ahead: beta drops to the largest row whose bound fits 1.25 m.
-    let obstacle = Obstacle::Circle { center: [3.0, 0.0], radius: 0.5 };
+    let obstacle = PlaneObstacle::Circle { center: [3.0, 0.0], radius: 0.5 };
     let step = online.step(&tracker, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
     assert_eq!(step.d_obs, Some(2.5));
     assert!(step.beta_query < step.beta_old && step.dteb_radius <= 1.25, "{step:?}");
@@ -71,12 +73,12 @@ async fn a_drop_in_beta_keeps_p_star_when_the_tracker_is_inside_the_smaller_boun
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_drop_in_beta_far_from_the_plan_resets_the_planner_inside_the_bound_and_replans() {
     let (_server, client) = shipped_server().await;
-    let mut online = OnlineLoop::start(&client, settings(), [0.0, 0.0]).await.unwrap();
+    let mut online = OnlineLoop::<PlaneObstacle, 2>::start(&client, settings(), [0.0, 0.0]).await.unwrap();
     let mut planner = GridAStar::default();
     online.step(&[0.0, 0.0, ALONG_X, 1.0], &[], &mut planner).await.unwrap();
     // The tracker 2.5 m off the plan, an obstacle 2.5 m beyond it: the smaller bound cannot hold p*.
     let tracker = [0.0, 2.5, ALONG_X, 1.0];
-    let obstacle = Obstacle::Circle { center: [0.0, 5.5], radius: 0.5 };
+    let obstacle = PlaneObstacle::Circle { center: [0.0, 5.5], radius: 0.5 };
     let step = online.step(&tracker, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
     assert!(step.beta_query < step.beta_old, "{step:?}");
     assert_eq!(step.branch, Branch::Reset, "{step:?}");
@@ -95,13 +97,13 @@ async fn a_drop_in_beta_far_from_the_plan_resets_the_planner_inside_the_bound_an
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_drop_in_beta_with_no_planner_state_inside_the_smaller_bound_holds_under_the_old_one() {
     let (_server, client) = shipped_server().await;
-    let mut online = OnlineLoop::start(&client, settings(), [0.0, 0.0]).await.unwrap();
+    let mut online = OnlineLoop::<PlaneObstacle, 2>::start(&client, settings(), [0.0, 0.0]).await.unwrap();
     let mut planner = GridAStar::default();
     // A tracker at 2.5 m/s, twice the planner's speed: no position within the smaller bound puts its relative
     // state inside that bound's set, so neither p* nor any reset candidate does.
     let fast = [0.0, 0.0, ALONG_X, 2.5];
     let first = online.step(&fast, &[], &mut planner).await.unwrap();
-    let obstacle = Obstacle::Circle { center: [3.6, 0.0], radius: 0.5 };
+    let obstacle = PlaneObstacle::Circle { center: [3.6, 0.0], radius: 0.5 };
     let mut step = online.step(&fast, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
     // Held step after step, the bound in force stays the old row's: the loop owns `beta_old`.
     for held in 0..3 {
@@ -148,7 +150,7 @@ async fn the_loop_never_keeps_or_resets_outside_the_certified_set() {
     let info = client.get_model(model_ref("dubins4d", 0)).await.unwrap();
     let row_for = |beta: f64| info.teb_table.iter().find(|r| r.beta >= beta - 1e-12).unwrap();
     // 1.5 m from the tracker: only the slowest row's bound fits half of it.
-    let obstacle = Obstacle::Circle { center: [0.0, -2.0], radius: 0.5 };
+    let obstacle = PlaneObstacle::Circle { center: [0.0, -2.0], radius: 0.5 };
     let trackers: Vec<[f64; 4]> = (0..16)
         .flat_map(|k| [0.5, 1.0, 1.5].map(|v| [0.0, 0.0, -3.0 + 0.4 * k as f64, v]))
         .chain([[0.0, 0.0, 0.074, 1.0]])
@@ -162,7 +164,7 @@ async fn the_loop_never_keeps_or_resets_outside_the_certified_set() {
     let mut planner = GridAStar::default();
     let (mut uncertified, mut branches) = (0, Vec::new());
     for (tracker, &value) in trackers.iter().zip(&at_start.values) {
-        let mut online = OnlineLoop::start(&client, settings(), [0.0, 0.0]).await.unwrap();
+        let mut online = OnlineLoop::<PlaneObstacle, 2>::start(&client, settings(), [0.0, 0.0]).await.unwrap();
         let step = online.step(tracker, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
         assert!(step.beta_query < step.beta_old || step.branch == Branch::Hold, "{step:?}");
         let uncertified_start = value > slowest.set_level && value <= slowest.bound;
@@ -195,13 +197,15 @@ async fn the_loop_never_keeps_or_resets_outside_the_certified_set() {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn bad_tracker_states_and_a_vanished_server_are_errors() {
     let (mut server, client) = shipped_server().await;
-    let mut online = OnlineLoop::start(&client, settings(), [0.0, 0.0]).await.unwrap();
+    let mut online = OnlineLoop::<PlaneObstacle, 2>::start(&client, settings(), [0.0, 0.0]).await.unwrap();
     let mut planner = GridAStar::default();
     let short = online.step(&[0.0, 0.0, 1.0], &[], &mut planner).await.unwrap_err();
     assert!(matches!(short, LoopError::Core(CoreError::Tracker(_))), "{short}");
     let nan = online.step(&[0.0, f64::NAN, 1.0, 1.0], &[], &mut planner).await.unwrap_err();
     assert!(nan.to_string().contains("tracker[1]"), "{nan}");
-    let bad_period = OnlineLoop::start(&client, LoopSettings { control_period: 0.0, ..settings() }, [0.0, 0.0]).await;
+    let bad_period =
+        OnlineLoop::<PlaneObstacle, 2>::start(&client, LoopSettings { control_period: 0.0, ..settings() }, [0.0, 0.0])
+            .await;
     assert!(matches!(bad_period, Err(LoopError::Core(CoreError::Setup(_)))));
     server.terminate();
     let gone = online.step(&[0.0, 0.0, ALONG_X, 1.0], &[], &mut planner).await.unwrap_err();
@@ -214,14 +218,11 @@ struct FailingFirst {
     requests: usize,
 }
 
-impl fastrack_online::raw_path::RawPathPlanner for FailingFirst {
-    fn plan(
-        &mut self,
-        request: &fastrack_online::raw_path::PlanRequest<'_>,
-    ) -> Result<Vec<[f64; 2]>, fastrack_online::raw_path::PlanError> {
+impl RawPathPlanner<PlaneObstacle, 2> for FailingFirst {
+    fn plan(&mut self, request: &PlanRequest<'_, PlaneObstacle, 2>) -> Result<Vec<[f64; 2]>, PlanError> {
         self.requests += 1;
         if self.requests <= self.failures {
-            return Err(fastrack_online::raw_path::PlanError::Settings("planner not ready".into()));
+            return Err(PlanError::Settings("planner not ready".into()));
         }
         GridAStar::default().plan(request)
     }
@@ -230,12 +231,12 @@ impl fastrack_online::raw_path::RawPathPlanner for FailingFirst {
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_step_whose_plan_failed_plans_again_next_time() {
     let (_server, client) = shipped_server().await;
-    let mut online = OnlineLoop::start(&client, settings(), [0.0, 0.0]).await.unwrap();
+    let mut online = OnlineLoop::<PlaneObstacle, 2>::start(&client, settings(), [0.0, 0.0]).await.unwrap();
     let mut planner = FailingFirst { failures: 0, requests: 0 };
     let tracker = [0.0, 0.0, ALONG_X, 1.0];
     online.step(&tracker, &[], &mut planner).await.unwrap();
     // The obstacle is sensed while the planner fails: the step is an error ...
-    let obstacle = Obstacle::Circle { center: [5.0, 0.0], radius: 0.5 };
+    let obstacle = PlaneObstacle::Circle { center: [5.0, 0.0], radius: 0.5 };
     planner.failures = planner.requests + 1;
     let failed = online.step(&tracker, std::slice::from_ref(&obstacle), &mut planner).await;
     assert!(matches!(failed, Err(LoopError::Core(CoreError::Plan(_)))), "{:?}", failed.map(|r| r.branch));

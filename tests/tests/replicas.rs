@@ -5,7 +5,7 @@
 
 use fastrack_client::{model_ref, pb, ClientOptions, FastrackClient};
 use fastrack_e2e::{robot_tick, TestServer};
-use fastrack_online::geometry::Obstacle;
+use fastrack_online::geometry::PlaneObstacle;
 use fastrack_online::online_loop::{LoopSettings, OnlineLoop};
 use fastrack_online::raw_path::GridAStar;
 use std::collections::BTreeMap;
@@ -204,7 +204,7 @@ async fn an_online_loop_keeps_its_bound_in_force_across_a_failover() {
     let mut online = OnlineLoop::start(&client, settings, [0.0, 0.0]).await.unwrap();
     let mut planner = GridAStar::default();
     let tracker = [0.0, 0.0, std::f64::consts::FRAC_PI_2, 1.0];
-    let obstacle = Obstacle::Circle { center: [3.6, 0.0], radius: 0.5 };
+    let obstacle = PlaneObstacle::Circle { center: [3.6, 0.0], radius: 0.5 };
     let first = online.step(&tracker, &[], &mut planner).await.unwrap();
     let dropped = online.step(&tracker, std::slice::from_ref(&obstacle), &mut planner).await.unwrap();
     assert!(dropped.beta_query < first.beta_query, "the obstacle lowers the row in force: {dropped:?}");

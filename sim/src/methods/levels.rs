@@ -8,7 +8,7 @@
 
 use super::{Context, Decision, MethodError, TimedPlanner};
 use fastrack_online::core::Answer;
-use fastrack_online::geometry::{clearance, remember, Obstacle, Point};
+use fastrack_online::geometry::{clearance, remember, PlaneObstacle, Point};
 use fastrack_online::raw_path::{advance_along, GridAStar, PlanError, PlanRequest, RawPathPlanner};
 use fastrack_proto::planner_speed::{SpeedRow, SpeedRule};
 use std::collections::VecDeque;
@@ -24,9 +24,9 @@ pub struct LevelPlanner {
     pending: Option<(usize, VecDeque<Point>)>,
     planner: Point,
     path: VecDeque<Point>,
-    obstacles: Vec<Obstacle>,
+    obstacles: Vec<PlaneObstacle>,
     replan: bool,
-    path_planner: TimedPlanner,
+    path_planner: TimedPlanner<PlaneObstacle, 2>,
     /// Choose the level by its path's travel time, not by its speed.
     quickest: bool,
 }
@@ -62,7 +62,11 @@ impl LevelPlanner {
     fn plan(&mut self, level: usize) -> Result<VecDeque<Point>, PlanError> {
         let inflation = self.levels[level].bound;
         if clearance(&self.obstacles, self.planner) <= inflation {
-            return Err(PlanError::NoPath { start: self.planner, goal: self.context.world.goal, inflation });
+            return Err(PlanError::NoPath {
+                start: self.planner.to_vec(),
+                goal: self.context.world.goal.to_vec(),
+                inflation,
+            });
         }
         let request = PlanRequest {
             start: self.planner,
@@ -116,7 +120,7 @@ impl LevelPlanner {
     }
 
     /// One control period.
-    pub async fn step(&mut self, tracker: &[f64], sensed: &[Obstacle]) -> Result<Decision, MethodError> {
+    pub async fn step(&mut self, tracker: &[f64], sensed: &[PlaneObstacle]) -> Result<Decision, MethodError> {
         let replanned = remember(&mut self.obstacles, sensed) || self.replan;
         if replanned {
             self.replan = false;

@@ -17,7 +17,7 @@ use crate::trace::LoopTrace;
 use crate::tracker::Tracker;
 use crate::visits::Visit;
 use crate::world::World;
-use fastrack_online::geometry::{Obstacle, Point};
+use fastrack_online::geometry::{PlaneObstacle, Point};
 use fastrack_proto::planner_speed::{SpeedRow, SpeedRule};
 use std::sync::Arc;
 use std::time::Duration;
@@ -215,7 +215,7 @@ impl Controller {
     }
 
     /// The decision for the control period starting at tracker state `tracker`, with `sensed` obstacles.
-    pub async fn step(&mut self, tracker: &[f64], sensed: &[Obstacle]) -> Result<Decision, MethodError> {
+    pub async fn step(&mut self, tracker: &[f64], sensed: &[PlaneObstacle]) -> Result<Decision, MethodError> {
         match self {
             Controller::Parametric(method) => method.step(tracker, sensed).await,
             Controller::Levels(method) => method.step(tracker, sensed).await,

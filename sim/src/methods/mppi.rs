@@ -9,7 +9,7 @@
 //! 2 rad/s on the turn rate and 0.5 m/s^2 on the acceleration (40% and 50% of their ranges).
 
 use super::{Context, Decision, MethodError};
-use fastrack_online::geometry::{clearance, norm, remember, sub, Obstacle};
+use fastrack_online::geometry::{clearance, norm, remember, sub, PlaneObstacle};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
@@ -60,7 +60,7 @@ pub struct Mppi {
     nominal: Vec<Vec<f64>>,
     /// Control periods left before the next plan.
     until_plan: usize,
-    obstacles: Vec<Obstacle>,
+    obstacles: Vec<PlaneObstacle>,
     rng: StdRng,
 }
 
@@ -91,7 +91,7 @@ impl Mppi {
     }
 
     /// One control period: plan again when due, apply the nominal sequence's first control.
-    pub fn step(&mut self, tracker: &[f64], sensed: &[Obstacle]) -> Result<Decision, MethodError> {
+    pub fn step(&mut self, tracker: &[f64], sensed: &[PlaneObstacle]) -> Result<Decision, MethodError> {
         let replanned = remember(&mut self.obstacles, sensed);
         if self.until_plan == 0 {
             self.plan(tracker);

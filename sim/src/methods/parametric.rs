@@ -8,15 +8,15 @@ use crate::trace::{LoopTrace, TraceStep, FORMAT};
 use crate::visits::Visit;
 use fastrack_online::core::{CoreSettings, DEFAULT_RESET_CANDIDATES};
 use fastrack_online::fastest_path::FastestPath;
-use fastrack_online::geometry::{Obstacle, Point};
+use fastrack_online::geometry::{PlaneObstacle, Point};
 use fastrack_online::online_loop::{Branch, OnlineLoop};
 use fastrack_online::raw_path::{GridAStar, RawPathPlanner};
 use fastrack_proto::planner_speed::SpeedRule;
 
 /// Parametric FaSTrack, running.
 pub struct Parametric {
-    online: OnlineLoop<BackendOracle>,
-    planner: TimedPlanner,
+    online: OnlineLoop<PlaneObstacle, 2, BackendOracle>,
+    planner: TimedPlanner<PlaneObstacle, 2>,
     /// The run's trace, when the context asks for one.
     trace: Option<LoopTrace>,
 }
@@ -52,7 +52,7 @@ impl Parametric {
             start,
             steps: Vec::new(),
         });
-        let planner: Box<dyn RawPathPlanner> =
+        let planner: Box<dyn RawPathPlanner<PlaneObstacle, 2>> =
             if fastest { Box::new(FastestPath::default()) } else { Box::new(GridAStar::default()) };
         let planner = TimedPlanner::new(planner);
         Ok(Self { online: OnlineLoop::new(oracle, settings, start)?, planner, trace })
@@ -64,7 +64,7 @@ impl Parametric {
     }
 
     /// One step of Alg. 3.
-    pub async fn step(&mut self, tracker: &[f64], sensed: &[Obstacle]) -> Result<Decision, MethodError> {
+    pub async fn step(&mut self, tracker: &[f64], sensed: &[PlaneObstacle]) -> Result<Decision, MethodError> {
         let mut new = Vec::new();
         if self.trace.is_some() {
             for obstacle in sensed {

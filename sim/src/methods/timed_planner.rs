@@ -1,18 +1,18 @@
 //! A raw-path planner that times its plans, for the benchmark's planning time per replan.
 
-use fastrack_online::geometry::Point;
+use fastrack_online::geometry::{Obstacle, Point};
 use fastrack_online::raw_path::{PlanError, PlanRequest, RawPathPlanner};
 use std::time::{Duration, Instant};
 
 /// Wraps a raw-path planner and adds up the wall time of the plans made since [`TimedPlanner::take`].
-pub struct TimedPlanner {
-    inner: Box<dyn RawPathPlanner>,
+pub struct TimedPlanner<O, const D: usize> {
+    inner: Box<dyn RawPathPlanner<O, D>>,
     since_taken: Option<Duration>,
 }
 
-impl TimedPlanner {
+impl<O, const D: usize> TimedPlanner<O, D> {
     /// Times `inner`.
-    pub fn new(inner: Box<dyn RawPathPlanner>) -> Self {
+    pub fn new(inner: Box<dyn RawPathPlanner<O, D>>) -> Self {
         Self { inner, since_taken: None }
     }
 
@@ -22,8 +22,8 @@ impl TimedPlanner {
     }
 }
 
-impl RawPathPlanner for TimedPlanner {
-    fn plan(&mut self, request: &PlanRequest<'_>) -> Result<Vec<Point>, PlanError> {
+impl<O: Obstacle<D>, const D: usize> RawPathPlanner<O, D> for TimedPlanner<O, D> {
+    fn plan(&mut self, request: &PlanRequest<'_, O, D>) -> Result<Vec<Point<D>>, PlanError> {
         let started = Instant::now();
         let path = self.inner.plan(request);
         *self.since_taken.get_or_insert(Duration::ZERO) += started.elapsed();
@@ -34,12 +34,13 @@ impl RawPathPlanner for TimedPlanner {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use fastrack_online::geometry::PlaneObstacle;
     use fastrack_online::raw_path::GridAStar;
     use fastrack_proto::planner_speed::SpeedRule;
 
     #[test]
     fn plans_add_up_until_taken() {
-        let mut planner = TimedPlanner::new(Box::new(GridAStar::default()));
+        let mut planner = TimedPlanner::<PlaneObstacle, 2>::new(Box::new(GridAStar::default()));
         assert_eq!(planner.take(), None, "nothing planned yet");
         let request = PlanRequest {
             start: [0.0, 0.0],

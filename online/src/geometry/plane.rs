@@ -1,16 +1,13 @@
 //! Obstacles in the planner's plane: circles, axis-aligned rectangles and walls (segments with a thickness),
-//! with exact distances from points and segments, so that inflation by a bound and line-of-sight checks
-//! are exact rather than sampled.
+//! with closed-form distances from points and segments.
 
+use super::{norm, point_segment_distance, sub, Obstacle, ObstacleError, Point};
 use serde::{Deserialize, Serialize};
 
-/// A point of the plane, in the planner's position coordinates (m).
-pub type Point = [f64; 2];
-
-/// One obstacle.
+/// One obstacle of the plane.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
 #[serde(tag = "kind", rename_all = "snake_case", deny_unknown_fields)]
-pub enum Obstacle {
+pub enum PlaneObstacle {
     /// A disc.
     Circle {
         /// Centre.
@@ -36,18 +33,12 @@ pub enum Obstacle {
     },
 }
 
-/// An obstacle that cannot exist: what is wrong with it.
-#[derive(Debug, Clone, PartialEq, thiserror::Error)]
-#[error("{0}")]
-pub struct ObstacleError(pub String);
-
-impl Obstacle {
-    /// Checks that every number is finite and every size positive.
-    pub fn validate(&self) -> Result<(), ObstacleError> {
+impl Obstacle<2> for PlaneObstacle {
+    fn validate(&self) -> Result<(), ObstacleError> {
         let finite = |p: &Point| p.iter().all(|x| x.is_finite());
         let bad = |what: String| Err(ObstacleError(what));
         match self {
-            Obstacle::Circle { center, radius } => {
+            PlaneObstacle::Circle { center, radius } => {
                 if !finite(center) {
                     return bad(format!("circle center {center:?} must be finite"));
                 }
@@ -55,7 +46,7 @@ impl Obstacle {
                     return bad(format!("circle radius = {radius}; must be a finite number > 0"));
                 }
             }
-            Obstacle::Rectangle { min, max } => {
+            PlaneObstacle::Rectangle { min, max } => {
                 if !(finite(min) && finite(max)) {
                     return bad(format!("rectangle corners {min:?}, {max:?} must be finite"));
                 }
@@ -63,7 +54,7 @@ impl Obstacle {
                     return bad(format!("rectangle min {min:?} must lie below and left of max {max:?}"));
                 }
             }
-            Obstacle::Wall { from, to, thickness } => {
+            PlaneObstacle::Wall { from, to, thickness } => {
                 if !(finite(from) && finite(to)) {
                     return bad(format!("wall ends {from:?}, {to:?} must be finite"));
                 }
@@ -75,26 +66,24 @@ impl Obstacle {
         Ok(())
     }
 
-    /// Distance from `p` to the obstacle (0 inside it).
-    pub fn distance(&self, p: Point) -> f64 {
+    fn distance(&self, p: Point) -> f64 {
         match self {
-            Obstacle::Circle { center, radius } => (norm(sub(p, *center)) - radius).max(0.0),
-            Obstacle::Rectangle { min, max } => {
+            PlaneObstacle::Circle { center, radius } => (norm(sub(p, *center)) - radius).max(0.0),
+            PlaneObstacle::Rectangle { min, max } => {
                 let dx = (min[0] - p[0]).max(p[0] - max[0]).max(0.0);
                 let dy = (min[1] - p[1]).max(p[1] - max[1]).max(0.0);
                 dx.hypot(dy)
             }
-            Obstacle::Wall { from, to, thickness } => {
+            PlaneObstacle::Wall { from, to, thickness } => {
                 (point_segment_distance(p, *from, *to) - thickness / 2.0).max(0.0)
             }
         }
     }
 
-    /// Distance from the segment `a`-`b` to the obstacle (0 if they touch).
-    pub fn segment_distance(&self, a: Point, b: Point) -> f64 {
+    fn segment_distance(&self, a: Point, b: Point) -> f64 {
         match self {
-            Obstacle::Circle { center, radius } => (point_segment_distance(*center, a, b) - radius).max(0.0),
-            Obstacle::Rectangle { min, max } => {
+            PlaneObstacle::Circle { center, radius } => (point_segment_distance(*center, a, b) - radius).max(0.0),
+            PlaneObstacle::Rectangle { min, max } => {
                 let inside = |p: Point| p[0] >= min[0] && p[0] <= max[0] && p[1] >= min[1] && p[1] <= max[1];
                 if inside(a) || inside(b) {
                     return 0.0;
@@ -104,66 +93,11 @@ impl Obstacle {
                     .map(|i| segment_segment_distance(a, b, corners[i], corners[(i + 1) % 4]))
                     .fold(f64::INFINITY, f64::min)
             }
-            Obstacle::Wall { from, to, thickness } => {
+            PlaneObstacle::Wall { from, to, thickness } => {
                 (segment_segment_distance(a, b, *from, *to) - thickness / 2.0).max(0.0)
             }
         }
     }
-
-    /// The obstacle's bounding box, `(min, max)`.
-    pub fn bounds(&self) -> (Point, Point) {
-        match self {
-            Obstacle::Circle { center, radius } => {
-                ([center[0] - radius, center[1] - radius], [center[0] + radius, center[1] + radius])
-            }
-            Obstacle::Rectangle { min, max } => (*min, *max),
-            Obstacle::Wall { from, to, thickness } => {
-                let h = thickness / 2.0;
-                ([from[0].min(to[0]) - h, from[1].min(to[1]) - h], [from[0].max(to[0]) + h, from[1].max(to[1]) + h])
-            }
-        }
-    }
-}
-
-/// Adds to `known` the obstacles of `sensed` it does not hold yet; true if there were any (an obstacle is
-/// newly sensed).
-pub fn remember(known: &mut Vec<Obstacle>, sensed: &[Obstacle]) -> bool {
-    let before = known.len();
-    for obstacle in sensed {
-        if !known.contains(obstacle) {
-            known.push(obstacle.clone());
-        }
-    }
-    known.len() > before
-}
-
-/// The smallest distance from `p` to any of `obstacles` (infinite for none).
-pub fn clearance(obstacles: &[Obstacle], p: Point) -> f64 {
-    obstacles.iter().map(|o| o.distance(p)).fold(f64::INFINITY, f64::min)
-}
-
-/// True if the segment `a`-`b` keeps more than `inflation` from every obstacle.
-pub fn segment_is_free(obstacles: &[Obstacle], a: Point, b: Point, inflation: f64) -> bool {
-    obstacles.iter().all(|o| o.segment_distance(a, b) > inflation)
-}
-
-/// `a - b`.
-pub fn sub(a: Point, b: Point) -> Point {
-    [a[0] - b[0], a[1] - b[1]]
-}
-
-/// Euclidean norm.
-pub fn norm(a: Point) -> f64 {
-    a[0].hypot(a[1])
-}
-
-/// Distance from `p` to the segment `a`-`b`.
-pub fn point_segment_distance(p: Point, a: Point, b: Point) -> f64 {
-    let ab = sub(b, a);
-    let length2 = ab[0] * ab[0] + ab[1] * ab[1];
-    let t =
-        if length2 > 0.0 { (((p[0] - a[0]) * ab[0] + (p[1] - a[1]) * ab[1]) / length2).clamp(0.0, 1.0) } else { 0.0 };
-    norm(sub(p, [a[0] + t * ab[0], a[1] + t * ab[1]]))
 }
 
 /// Distance between the segments `a`-`b` and `c`-`d` (0 if they cross).
@@ -182,34 +116,35 @@ pub fn segment_segment_distance(a: Point, b: Point, c: Point, d: Point) -> f64 {
 #[cfg(test)]
 mod tests {
     use super::*;
+    use crate::geometry::segment_is_free;
 
     #[test]
     fn distances_match_closed_forms() {
-        let circle = Obstacle::Circle { center: [1.0, 1.0], radius: 0.5 };
+        let circle = PlaneObstacle::Circle { center: [1.0, 1.0], radius: 0.5 };
         assert!((circle.distance([3.0, 1.0]) - 1.5).abs() < 1e-12);
         assert_eq!(circle.distance([1.2, 1.1]), 0.0);
-        let rectangle = Obstacle::Rectangle { min: [0.0, 0.0], max: [2.0, 1.0] };
+        let rectangle = PlaneObstacle::Rectangle { min: [0.0, 0.0], max: [2.0, 1.0] };
         assert!((rectangle.distance([3.0, 2.0]) - 2f64.sqrt()).abs() < 1e-12);
         assert!((rectangle.distance([1.0, -0.5]) - 0.5).abs() < 1e-12);
         assert_eq!(rectangle.distance([1.0, 0.5]), 0.0);
-        let wall = Obstacle::Wall { from: [0.0, 0.0], to: [4.0, 0.0], thickness: 0.2 };
+        let wall = PlaneObstacle::Wall { from: [0.0, 0.0], to: [4.0, 0.0], thickness: 0.2 };
         assert!((wall.distance([2.0, 1.0]) - 0.9).abs() < 1e-12);
         assert!((wall.distance([5.0, 0.0]) - 0.9).abs() < 1e-12);
     }
 
     #[test]
     fn segment_distances_see_crossings_and_near_misses() {
-        let rectangle = Obstacle::Rectangle { min: [0.0, 0.0], max: [1.0, 1.0] };
+        let rectangle = PlaneObstacle::Rectangle { min: [0.0, 0.0], max: [1.0, 1.0] };
         // Crossing through the rectangle without an end inside it.
         assert_eq!(rectangle.segment_distance([-1.0, 0.5], [2.0, 0.5]), 0.0);
         // Passing 0.25 above it.
         assert!((rectangle.segment_distance([-1.0, 1.25], [2.0, 1.25]) - 0.25).abs() < 1e-12);
-        let circle = Obstacle::Circle { center: [0.0, 0.0], radius: 1.0 };
+        let circle = PlaneObstacle::Circle { center: [0.0, 0.0], radius: 1.0 };
         assert!((circle.segment_distance([-2.0, 2.0], [2.0, 2.0]) - 1.0).abs() < 1e-12);
         assert!(segment_is_free(std::slice::from_ref(&circle), [-2.0, 2.0], [2.0, 2.0], 0.9));
         assert!(!segment_is_free(&[circle], [-2.0, 2.0], [2.0, 2.0], 1.0));
         // Against a brute-force minimum over points of the segment.
-        let wall = Obstacle::Wall { from: [0.0, 0.0], to: [1.0, 2.0], thickness: 0.3 };
+        let wall = PlaneObstacle::Wall { from: [0.0, 0.0], to: [1.0, 2.0], thickness: 0.3 };
         let (a, b) = ([2.0, -1.0], [3.0, 3.0]);
         let brute = (0..=10_000)
             .map(|k| {
@@ -223,14 +158,14 @@ mod tests {
     #[test]
     fn impossible_obstacles_are_named() {
         let bad = [
-            Obstacle::Circle { center: [0.0, f64::NAN], radius: 1.0 },
-            Obstacle::Circle { center: [0.0, 0.0], radius: -1.0 },
-            Obstacle::Rectangle { min: [1.0, 0.0], max: [0.0, 1.0] },
-            Obstacle::Wall { from: [0.0, 0.0], to: [1.0, 0.0], thickness: 0.0 },
+            PlaneObstacle::Circle { center: [0.0, f64::NAN], radius: 1.0 },
+            PlaneObstacle::Circle { center: [0.0, 0.0], radius: -1.0 },
+            PlaneObstacle::Rectangle { min: [1.0, 0.0], max: [0.0, 1.0] },
+            PlaneObstacle::Wall { from: [0.0, 0.0], to: [1.0, 0.0], thickness: 0.0 },
         ];
         for obstacle in bad {
             assert!(obstacle.validate().is_err(), "{obstacle:?} was accepted");
         }
-        assert!(Obstacle::Wall { from: [0.0, 0.0], to: [1.0, 0.0], thickness: 0.1 }.validate().is_ok());
+        assert!(PlaneObstacle::Wall { from: [0.0, 0.0], to: [1.0, 0.0], thickness: 0.1 }.validate().is_ok());
     }
 }
