@@ -116,8 +116,9 @@ impl<'r, O: Obstacle<D>, const D: usize> CellGrid<'r, O, D> {
                 "the bounds {lo:?}..{hi:?} span more than {MAX_CELLS_PER_SIDE} cells of {cell} m a side (or are not finite)"
             )));
         }
+        // In lexicographic order, the first axis slowest: A* breaks ties by it.
         let neighbours = (0..3i64.pow(D as u32))
-            .map(|k| std::array::from_fn(|axis| (k / 3i64.pow(axis as u32)) % 3 - 1))
+            .map(|k| std::array::from_fn(|axis| (k / 3i64.pow((D - 1 - axis) as u32)) % 3 - 1))
             .filter(|offset: &[i64; D]| offset.iter().any(|&o| o != 0))
             .collect();
         let grid = Self { request, cell, counts: std::array::from_fn(|axis| span(axis) as i64 + 1), neighbours };
@@ -168,14 +169,13 @@ impl<'r, O: Obstacle<D>, const D: usize> CellGrid<'r, O, D> {
     }
 
     /// The length of the shortest path of steps between touching cells from `a` to `b` (the octile distance
-    /// in the plane), in integer cost units: with the axis gaps sorted largest first, `g_k` steps along `k + 1`
-    /// axes at once cost `sqrt(k + 1)` cells each, where `g_k` is the k-th gap less the next.
+    /// in the plane), in integer cost units. With the axis gaps `g_0 >= g_1 >= ...`, it takes `g_k - g_(k+1)`
+    /// steps along `k + 1` axes at once, of `sqrt(k + 1)` cells each: `g_0 + sum_k (sqrt(k + 1) - sqrt(k)) g_k`.
     pub(crate) fn octile(&self, a: Cell<D>, b: Cell<D>) -> u64 {
         let mut gaps: [f64; D] = std::array::from_fn(|axis| (a[axis] - b[axis]).abs() as f64);
         gaps.sort_by(|x, y| y.total_cmp(x));
-        let cells: f64 =
-            (0..D).map(|k| (gaps[k] - gaps.get(k + 1).copied().unwrap_or(0.0)) * ((k + 1) as f64).sqrt()).sum();
-        (cells * self.cell * COST_SCALE) as u64
+        let diagonal: f64 = (1..D).map(|k| (((k + 1) as f64).sqrt() - (k as f64).sqrt()) * gaps[k]).sum();
+        ((gaps[0] + diagonal) * self.cell * COST_SCALE) as u64
     }
 
     /// A* over the allowed steps, each costing `step_cost(a, b)`, with the admissible `heuristic`: the path

@@ -13,7 +13,7 @@ use crate::methods::{Context, Controller, Method, MethodError};
 use crate::trace::LoopTrace;
 use crate::tracker::{Disturbance, RangeSensor, Tracker};
 use crate::visits::Visit;
-use crate::world::World;
+use crate::world::PlaneWorld;
 use fastrack_client::{pb, FastrackClient};
 use fastrack_online::geometry::{clearance, norm, sub, Point};
 use fastrack_proto::planner_speed::SpeedRow;
@@ -284,7 +284,7 @@ impl Simulator {
     /// by `seed`.
     pub fn spawn_run(
         self: &Arc<Self>,
-        world: World,
+        world: PlaneWorld,
         method: Method,
         seed: u64,
     ) -> JoinHandle<Result<Run, MethodError>> {
@@ -294,7 +294,7 @@ impl Simulator {
 
     /// Runs `method` through `world`, its randomness seeded by `seed`. Whatever the server does, the run
     /// ends with an [`Outcome`]; an error means only that the method cannot run on this model.
-    pub async fn run(&self, world: &World, method: &Method, seed: u64) -> Result<Run, MethodError> {
+    pub async fn run(&self, world: &PlaneWorld, method: &Method, seed: u64) -> Result<Run, MethodError> {
         let (tracker, settings, control_period) = (&self.tracker, &self.settings, self.control_period);
         let context = Context {
             backend: self.backend.clone(),

@@ -3,7 +3,7 @@
 //! (Fig. 4), and `beta`, clearance, tracking error and bound over time.
 
 use crate::episode::Run;
-use crate::world::World;
+use crate::world::PlaneWorld;
 use fastrack_lab::plot::{fonts_available, line_chart, Chart, Series};
 use fastrack_online::geometry::{Obstacle, PlaneObstacle, Point};
 use plotters::coord::types::RangedCoordf64;
@@ -64,7 +64,7 @@ fn outline(obstacle: &PlaneObstacle) -> Vec<(f64, f64)> {
 }
 
 /// Obstacles of `world` some sample of `run` came within sensing range of.
-fn ever_sensed<'a>(world: &'a World, run: &Run) -> Vec<&'a PlaneObstacle> {
+fn ever_sensed<'a>(world: &'a PlaneWorld, run: &Run) -> Vec<&'a PlaneObstacle> {
     world
         .obstacles
         .iter()
@@ -77,7 +77,7 @@ fn ever_sensed<'a>(world: &'a World, run: &Run) -> Vec<&'a PlaneObstacle> {
 
 fn draw_world<DB: DrawingBackend>(
     chart: &mut ChartContext<'_, DB, Cartesian2d<RangedCoordf64, RangedCoordf64>>,
-    world: &World,
+    world: &PlaneWorld,
     sensed: &[&PlaneObstacle],
 ) -> Result<(), String> {
     for obstacle in &world.obstacles {
@@ -93,7 +93,7 @@ fn draw_world<DB: DrawingBackend>(
 /// The world's workspace as a white chart in metres on `root`, captioned and with axes when fonts exist.
 fn world_chart<'r, 'b>(
     root: &'r DrawingArea<BitMapBackend<'b>, plotters::coord::Shift>,
-    world: &World,
+    world: &PlaneWorld,
     caption: &str,
     text: bool,
 ) -> Result<ChartContext<'r, BitMapBackend<'b>, Cartesian2d<RangedCoordf64, RangedCoordf64>>, String> {
@@ -116,7 +116,7 @@ fn world_chart<'r, 'b>(
 /// Draws one run through `world` into a 1100x760 PNG: the tracker's path coloured by `beta`, the planner
 /// dotted, the sTEB (green) and the dTEB (orange) around the planner every `every` seconds, the sensing
 /// range (dashed grey) at the same places, sensed obstacles dark, the others light, the goal green.
-pub fn trajectory(path: &Path, world: &World, run: &Run, beta_l: f64, every: f64) -> Result<(), String> {
+pub fn trajectory(path: &Path, world: &PlaneWorld, run: &Run, beta_l: f64, every: f64) -> Result<(), String> {
     let text = fonts_available();
     let root = BitMapBackend::new(path, (1100, 760)).into_drawing_area();
     let caption = format!("{}: {} after {:.1} s", run.method, run.outcome.label(), run.time);
@@ -157,7 +157,7 @@ pub fn trajectory(path: &Path, world: &World, run: &Run, beta_l: f64, every: f64
 }
 
 /// Draws every run through the same `world` into one PNG, one colour per method (the paper's Fig. 4).
-pub fn methods_on_one_world(path: &Path, world: &World, runs: &[&Run]) -> Result<(), String> {
+pub fn methods_on_one_world(path: &Path, world: &PlaneWorld, runs: &[&Run]) -> Result<(), String> {
     let text = fonts_available();
     let root = BitMapBackend::new(path, (1100, 760)).into_drawing_area();
     let mut chart = world_chart(&root, world, "every method through one world", text)?;

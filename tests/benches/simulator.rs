@@ -12,7 +12,7 @@ use fastrack_sim::backend::Backend;
 use fastrack_sim::episode::{Run, RunSettings, Simulator};
 use fastrack_sim::in_process::LocalModel;
 use fastrack_sim::methods::Method;
-use fastrack_sim::world::{World, WorldSpec};
+use fastrack_sim::world::{PlaneWorld, WorldSpec};
 use serde_json::json;
 use std::path::Path;
 use std::time::Instant;
@@ -21,7 +21,7 @@ const WORLDS: u64 = 10;
 const BUNDLE: &str = "dubins4d/4";
 
 /// Control periods per second over every run of `method` on `worlds`, and the runs.
-async fn rate(simulator: &Simulator, worlds: &[World], method: &Method) -> anyhow::Result<(f64, Vec<Run>)> {
+async fn rate(simulator: &Simulator, worlds: &[PlaneWorld], method: &Method) -> anyhow::Result<(f64, Vec<Run>)> {
     let started = Instant::now();
     let mut runs = Vec::with_capacity(worlds.len());
     for (i, world) in worlds.iter().enumerate() {
@@ -39,7 +39,7 @@ fn main() -> anyhow::Result<()> {
         let service = Simulator::connect(&client, RunSettings::default()).await?;
         let local = LocalModel::load(&models.join(BUNDLE), None, 1)?;
         let in_process = Simulator::new(Backend::InProcess(local), RunSettings::default()).await?;
-        let worlds: Vec<World> = (1..=WORLDS)
+        let worlds: Vec<PlaneWorld> = (1..=WORLDS)
             .map(|seed| WorldSpec { seed, inflation: service.steb_radius(), ..WorldSpec::default() }.generate())
             .collect::<Result<_, _>>()?;
         let mut rows = Vec::new();

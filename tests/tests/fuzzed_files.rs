@@ -1,10 +1,12 @@
-//! World files and training configs nobody meant to write: a generated world and the shipped training
-//! config, each with one node replaced or removed, or the text cut short or a bit flipped. Reading either
-//! never panics; a refusal names the file; a world that is accepted can be checked for feasibility (the
-//! planner's search over it ends). `FASTRACK_FUZZ_CASES` sets the cases (default 300 each).
+//! World files and training configs nobody meant to write: a generated world (in the plane and in space) and
+//! the shipped training config, each with one node replaced or removed, or the text cut short or a bit
+//! flipped. Reading either never panics; a refusal names the file; a world that is accepted can be checked
+//! for feasibility (the planner's search over it ends). `FASTRACK_FUZZ_CASES` sets the cases (default 300
+//! each; half that for worlds in space).
 
 use fastrack_e2e::fuzz::{cases, damage, json_text, toml_text, Tally};
-use fastrack_sim::world::{World, WorldSpec};
+use fastrack_online::geometry::{PlaneObstacle, SpaceObstacle};
+use fastrack_sim::world::{World, WorldObstacle, WorldSpec};
 use fastrack_trainer::config::TrainConfig;
 use proptest::prelude::*;
 use proptest::test_runner::{Config, TestRunner};
@@ -17,11 +19,21 @@ fn repository() -> PathBuf {
 
 #[test]
 fn damaged_world_files_are_refused_by_field_or_file_and_accepted_ones_can_be_planned() {
-    let world = WorldSpec { seed: 3, ..WorldSpec::default() }.generate().unwrap();
+    damaged_worlds::<PlaneObstacle, 2>("worlds", cases(300));
+}
+
+#[test]
+fn damaged_world_files_in_space_are_refused_by_field_or_file_and_accepted_ones_can_be_planned() {
+    damaged_worlds::<SpaceObstacle, 3>("worlds in space", cases(300) / 2);
+}
+
+/// Damaged copies of world 3 of `D` axes: each is refused naming the file or field, or checked.
+fn damaged_worlds<O: WorldObstacle<D>, const D: usize>(label: &'static str, cases: u32) {
+    let world: World<O, D> = WorldSpec { seed: 3, ..WorldSpec::default() }.generate().unwrap();
     let tree = serde_json::to_value(&world).unwrap();
     let dir = tempfile::tempdir().unwrap();
-    let config = Config { cases: cases(300), failure_persistence: None, ..Config::default() };
-    let tally = RefCell::new(Tally::new("worlds", config.cases));
+    let config = Config { cases, failure_persistence: None, ..Config::default() };
+    let tally = RefCell::new(Tally::new(label, config.cases));
     TestRunner::new(config)
         .run(&(damage(), any::<bool>()), |(damage, as_json)| {
             let (path, bytes) = if as_json {
@@ -30,7 +42,7 @@ fn damaged_world_files_are_refused_by_field_or_file_and_accepted_ones_can_be_pla
                 (dir.path().join("world.toml"), damage.apply(&tree, toml_text))
             };
             std::fs::write(&path, bytes).unwrap();
-            match World::load(&path) {
+            match World::<O, D>::load(&path) {
                 Ok(world) => {
                     tally.borrow_mut().count(damage.kind(), true);
                     // Feasible or not, the check ends with an answer.

@@ -7,7 +7,7 @@ use fastrack_e2e::{binary, run_binary, TestServer};
 use fastrack_sim::bench::{summarise, table, time_ratio};
 use fastrack_sim::episode::{Outcome, Run, RunSettings, Simulator};
 use fastrack_sim::methods::{Method, MppiSettings};
-use fastrack_sim::world::{World, WorldFamily, WorldSpec};
+use fastrack_sim::world::{PlaneWorld, WorldFamily, WorldSpec};
 use std::path::Path;
 use std::process::Command;
 use std::sync::atomic::{AtomicBool, Ordering};
@@ -23,7 +23,7 @@ async fn shipped() -> (TestServer, Arc<Simulator>) {
     (server, Arc::new(simulator))
 }
 
-fn worlds(count: u64, steb: f64) -> Vec<World> {
+fn worlds(count: u64, steb: f64) -> Vec<PlaneWorld> {
     (1..=count).map(|seed| WorldSpec { seed, inflation: steb, ..WorldSpec::default() }.generate().unwrap()).collect()
 }
 
@@ -183,7 +183,7 @@ async fn worlds_generated_for_a_larger_steb_keep_it_clear() {
     let mut larger = world_args(steb + 0.6);
     larger.extend(["--out".into(), out.to_str().unwrap().into()]);
     run_binary("fastrack", &larger.iter().map(String::as_str).collect::<Vec<_>>());
-    World::load(&out).unwrap().check_feasible(steb + 0.6).unwrap();
+    PlaneWorld::load(&out).unwrap().check_feasible(steb + 0.6).unwrap();
     let refused = Command::new(binary("fastrack")).args(world_args(steb * 0.5)).output().unwrap();
     let said = String::from_utf8_lossy(&refused.stderr);
     assert!(!refused.status.success() && said.contains("--feasible-for must be"), "{said}");

@@ -16,7 +16,7 @@ use crate::backend::Backend;
 use crate::trace::LoopTrace;
 use crate::tracker::Tracker;
 use crate::visits::Visit;
-use crate::world::World;
+use crate::world::PlaneWorld;
 use fastrack_online::geometry::{PlaneObstacle, Point};
 use fastrack_proto::planner_speed::{SpeedRow, SpeedRule};
 use std::sync::Arc;
@@ -167,7 +167,7 @@ pub struct Context {
     /// The simulated tracker (dynamics, relative states).
     pub tracker: Arc<Tracker>,
     /// The world's goal and workspace.
-    pub world: Arc<World>,
+    pub world: Arc<PlaneWorld>,
     /// Control period (s).
     pub control_period: f64,
     /// Seed of the method's own randomness.

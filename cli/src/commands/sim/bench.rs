@@ -13,7 +13,7 @@ use fastrack_sim::episode::Run;
 use fastrack_sim::methods::Method;
 use fastrack_sim::plot::{methods_on_one_world, time_to_goal};
 use fastrack_sim::visits::write_csv;
-use fastrack_sim::world::World;
+use fastrack_sim::world::PlaneWorld;
 use indicatif::{ProgressBar, ProgressStyle};
 use serde_json::json;
 use std::path::{Path, PathBuf};
@@ -75,7 +75,7 @@ pub(super) async fn run(client: &FastrackClient, args: Args, json_mode: bool) ->
     let methods: Vec<Method> =
         args.methods.iter().map(|m| Method::parse(m)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
     let seeds: Vec<u64> = (1..=args.worlds).filter(|&seed| shard.takes(seed as usize - 1)).collect();
-    let worlds: Vec<(u64, World)> = seeds
+    let worlds: Vec<(u64, PlaneWorld)> = seeds
         .iter()
         .map(|&seed| Ok((seed, world_of(None, &args.generation, seed, simulator.steb_radius())?)))
         .collect::<anyhow::Result<_>>()?;

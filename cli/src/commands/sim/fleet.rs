@@ -6,7 +6,7 @@ use fastrack_cli::load_generator::LatencySummary;
 use fastrack_client::FastrackClient;
 use fastrack_lab::record::write_record;
 use fastrack_sim::methods::Method;
-use fastrack_sim::world::World;
+use fastrack_sim::world::PlaneWorld;
 use serde_json::json;
 use std::time::{Duration, Instant};
 
@@ -31,7 +31,7 @@ pub(super) async fn run(client: &FastrackClient, args: Args, json_mode: bool) ->
     let mut figures = Vec::new();
     for &robots in &args.robots {
         anyhow::ensure!(robots > 0, "--robots takes counts of at least 1");
-        let worlds: Vec<World> = (1..=robots as u64)
+        let worlds: Vec<PlaneWorld> = (1..=robots as u64)
             .map(|seed| world_of(None, &args.generation, seed, simulator.steb_radius()))
             .collect::<anyhow::Result<_>>()?;
         let started = Instant::now();

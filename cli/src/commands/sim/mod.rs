@@ -14,7 +14,7 @@ use fastrack_client::{model_ref, FastrackClient};
 use fastrack_proto::planner_speed::SpeedRow;
 use fastrack_sim::episode::{RunSettings, Simulator};
 use fastrack_sim::tracker::Disturbance;
-use fastrack_sim::world::{World, WorldFamily, WorldSpec};
+use fastrack_sim::world::{PlaneWorld, WorldFamily, WorldSpec};
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -114,7 +114,7 @@ struct Generation {
 }
 
 fn default_popup_beyond() -> f64 {
-    WorldSpec::default().popup_beyond
+    WorldSpec::<2>::default().popup_beyond
 }
 
 impl Generation {
@@ -127,7 +127,7 @@ impl Generation {
         }
     }
 
-    fn spec(&self, seed: u64, inflation: f64) -> anyhow::Result<WorldSpec> {
+    fn spec(&self, seed: u64, inflation: f64) -> anyhow::Result<WorldSpec<2>> {
         let (&[w, h], &[lo, hi]) = (self.size.as_slice(), self.size_range.as_slice()) else {
             anyhow::bail!("--size and --size-range take two numbers each, e.g. --size 30,20 --size-range 0.4,1.5");
         };
@@ -174,10 +174,10 @@ async fn speeds(client: &FastrackClient, model: &str) -> anyhow::Result<Vec<Spee
 }
 
 /// The world of a run: the file, or the seed's generated world.
-fn world_of(file: Option<&PathBuf>, generation: &Generation, seed: u64, steb: f64) -> anyhow::Result<World> {
+fn world_of(file: Option<&PathBuf>, generation: &Generation, seed: u64, steb: f64) -> anyhow::Result<PlaneWorld> {
     let inflation = generation.inflation(steb)?;
     let world = match file {
-        Some(path) => World::load(path)?,
+        Some(path) => PlaneWorld::load(path)?,
         None => generation.spec(seed, inflation)?.generate()?,
     };
     world.check_feasible(inflation).context("the world is not feasible for the sTEB")?;
