@@ -13,21 +13,25 @@ use std::time::Duration;
 /// The world whose runs the benchmark's figure shows; the others keep no samples.
 pub const FIGURE_WORLD: u64 = 1;
 
-/// One run of a benchmark.
+/// One run of a benchmark through worlds of obstacles `O` and `D` axes.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct BenchRun {
+#[serde(bound(
+    serialize = "O: Serialize, [f64; D]: Serialize",
+    deserialize = "O: Deserialize<'de>, [f64; D]: Deserialize<'de>"
+))]
+pub struct BenchRun<O, const D: usize> {
     /// The world's seed (worlds 1..=N).
     pub world: u64,
     /// The method's position in the benchmark's list of methods.
     pub method: usize,
     /// The run; its per-period samples only on [`FIGURE_WORLD`], its visits only when kept.
-    pub run: Run,
+    pub run: Run<O, D>,
 }
 
-impl BenchRun {
+impl<O, const D: usize> BenchRun<O, D> {
     /// The run of `method` on `world`, its samples dropped unless the figure shows that world and its visits
     /// unless `keep_visits`.
-    pub fn new(world: u64, method: usize, mut run: Run, keep_visits: bool) -> Self {
+    pub fn new(world: u64, method: usize, mut run: Run<O, D>, keep_visits: bool) -> Self {
         if world != FIGURE_WORLD {
             run.samples = Vec::new();
         }
@@ -42,7 +46,7 @@ impl BenchRun {
 pub const PART_STEM: &str = "sim-bench";
 
 /// What one shard of a benchmark ran.
-pub type BenchPart = Part<BenchRun>;
+pub type BenchPart<O, const D: usize> = Part<BenchRun<O, D>>;
 
 /// The paper's Table 1 (20 runs): reached %, collision %, solution time (s), by method label.
 pub const PAPER_TABLE: [(&str, f64, f64, f64); 4] = [
@@ -107,7 +111,7 @@ impl Summary {
 }
 
 /// Summarises the runs of one method.
-pub fn summarise(method: &str, runs: &[&Run]) -> Summary {
+pub fn summarise<O, const D: usize>(method: &str, runs: &[&Run<O, D>]) -> Summary {
     let count = |f: &dyn Fn(&Outcome) -> bool| runs.iter().filter(|r| f(&r.outcome)).count();
     let times: Vec<f64> = runs.iter().filter(|r| r.outcome == Outcome::Reached).map(|r| r.time).collect();
     let time_to_goal = (!times.is_empty()).then(|| {
@@ -120,7 +124,8 @@ pub fn summarise(method: &str, runs: &[&Run]) -> Summary {
     let rank = |q: f64| {
         decisions.get(((q * decisions.len() as f64).ceil() as usize).clamp(1, decisions.len().max(1)) - 1).copied()
     };
-    let mean = |f: &dyn Fn(&Run) -> usize| runs.iter().map(|r| f(r) as f64).sum::<f64>() / runs.len().max(1) as f64;
+    let mean =
+        |f: &dyn Fn(&Run<O, D>) -> usize| runs.iter().map(|r| f(r) as f64).sum::<f64>() / runs.len().max(1) as f64;
     let mut beta_shares: Vec<(f64, f64)> = Vec::new();
     for &(beta, seconds) in runs.iter().flat_map(|r| &r.beta_seconds) {
         add_seconds(&mut beta_shares, beta, seconds);
@@ -258,7 +263,7 @@ pub fn paper_comparison(summaries: &[Summary]) -> MarkdownTable {
 
 /// PF's mean time to goal over another method's, on the worlds both reached (the paper: 22.47 / 37.31 = 0.60
 /// against FaSTrack).
-pub fn time_ratio(pf: &[&Run], other: &[&Run]) -> Option<(f64, usize)> {
+pub fn time_ratio<O, const D: usize>(pf: &[&Run<O, D>], other: &[&Run<O, D>]) -> Option<(f64, usize)> {
     let pairs: Vec<(f64, f64)> = pf
         .iter()
         .zip(other)

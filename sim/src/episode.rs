@@ -13,9 +13,9 @@ use crate::methods::{Context, Controller, Method, MethodError};
 use crate::trace::LoopTrace;
 use crate::tracker::{Disturbance, RangeSensor, Tracker};
 use crate::visits::Visit;
-use crate::world::PlaneWorld;
+use crate::world::{World, WorldObstacle};
 use fastrack_client::{pb, FastrackClient};
-use fastrack_online::geometry::{clearance, norm, sub, Point};
+use fastrack_online::geometry::{clearance, norm, sub, PlaneObstacle, Point};
 use fastrack_proto::planner_speed::SpeedRow;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
@@ -95,15 +95,16 @@ impl Outcome {
     }
 }
 
-/// The state of the run after one control period.
+/// The state of the run after one control period, positions of `D` axes.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Sample {
+#[serde(bound(serialize = "[f64; D]: Serialize", deserialize = "[f64; D]: Deserialize<'de>"))]
+pub struct Sample<const D: usize> {
     /// Time at the end of the period (s).
     pub t: f64,
     /// Tracker position.
-    pub position: Point,
+    pub position: Point<D>,
     /// Planner position, if the method has a planner.
-    pub planner: Option<Point>,
+    pub planner: Option<Point<D>>,
     /// Planner speed bound.
     pub beta: Option<f64>,
     /// Bound in force.
@@ -116,9 +117,13 @@ pub struct Sample {
     pub sensed: usize,
 }
 
-/// A finished run.
+/// A run through a world of obstacles `O` and `D` axes, finished.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct Run {
+#[serde(bound(
+    serialize = "O: Serialize, [f64; D]: Serialize",
+    deserialize = "O: Deserialize<'de>, [f64; D]: Deserialize<'de>"
+))]
+pub struct Run<O, const D: usize> {
     /// The method's label.
     pub method: String,
     /// How it ended.
@@ -126,7 +131,7 @@ pub struct Run {
     /// Time when it ended (s): the time to goal when reached.
     pub time: f64,
     /// One sample per control period.
-    pub samples: Vec<Sample>,
+    pub samples: Vec<Sample<D>>,
     /// Smallest distance to an obstacle of the true map over the run (m).
     pub min_clearance: f64,
     /// Largest `error - bound` over the run (m; negative when the error stayed inside).
@@ -167,16 +172,19 @@ pub struct Run {
     /// The control period used (s).
     pub control_period: f64,
     /// The planner's raw path at the end.
-    pub final_path: Vec<Point>,
+    pub final_path: Vec<Point<D>>,
     /// The relative state of every control period of the online loop, with its branch (Parametric FaSTrack).
     #[serde(default, skip_serializing_if = "Vec::is_empty")]
     pub visits: Vec<Visit>,
     /// The online loop's trace (Parametric FaSTrack, when the settings ask for it).
     #[serde(default, skip_serializing_if = "Option::is_none")]
-    pub trace: Option<LoopTrace>,
+    pub trace: Option<LoopTrace<O, D>>,
 }
 
-impl Run {
+/// A run through a world in the plane.
+pub type PlaneRun = Run<PlaneObstacle, 2>;
+
+impl<O, const D: usize> Run<O, D> {
     /// The planner speed bound in use, averaged over the run's time (`None` for a method without one).
     pub fn mean_beta(&self) -> Option<f64> {
         let seconds: f64 = self.beta_seconds.iter().map(|(_, s)| s).sum();
@@ -280,22 +288,39 @@ impl Simulator {
         self.tracker.system().state.iter().map(|d| d.name.to_string()).collect()
     }
 
+    /// Axes of the model's planner, and of the worlds its runs go through: 2 or 3.
+    pub fn dim(&self) -> usize {
+        self.tracker.dim()
+    }
+
     /// Runs `method` through `world` on a thread of its own (see the module's doc), its randomness seeded
     /// by `seed`.
-    pub fn spawn_run(
+    pub fn spawn_run<O: WorldObstacle<D>, const D: usize>(
         self: &Arc<Self>,
-        world: PlaneWorld,
+        world: World<O, D>,
         method: Method,
         seed: u64,
-    ) -> JoinHandle<Result<Run, MethodError>> {
+    ) -> JoinHandle<Result<Run<O, D>, MethodError>> {
         let (simulator, runtime) = (Arc::clone(self), tokio::runtime::Handle::current());
         tokio::task::spawn_blocking(move || runtime.block_on(simulator.run(&world, &method, seed)))
     }
 
     /// Runs `method` through `world`, its randomness seeded by `seed`. Whatever the server does, the run
-    /// ends with an [`Outcome`]; an error means only that the method cannot run on this model.
-    pub async fn run(&self, world: &PlaneWorld, method: &Method, seed: u64) -> Result<Run, MethodError> {
+    /// ends with an [`Outcome`]; an error means only that the method cannot run on this model (a world of
+    /// another dimension than the model's planner among them).
+    pub async fn run<O: WorldObstacle<D>, const D: usize>(
+        &self,
+        world: &World<O, D>,
+        method: &Method,
+        seed: u64,
+    ) -> Result<Run<O, D>, MethodError> {
         let (tracker, settings, control_period) = (&self.tracker, &self.settings, self.control_period);
+        if tracker.dim() != D {
+            return Err(MethodError::Setup(format!(
+                "a world of {D} axes for a model whose planner has {}",
+                tracker.dim()
+            )));
+        }
         let context = Context {
             backend: self.backend.clone(),
             speeds: self.speeds.clone(),
@@ -308,9 +333,8 @@ impl Simulator {
             control_period,
             seed,
         };
-        let mut s = tracker
-            .initial_state(world.start, &[("theta", world.start_heading), ("v", world.start_speed)])
-            .map_err(MethodError::Setup)?;
+        let mut s =
+            tracker.initial_state(&world.start, world.start_heading, world.start_speed).map_err(MethodError::Setup)?;
         let started = Controller::start(method, context, &s).await;
         let mut rng = StdRng::seed_from_u64(seed ^ 0xD15_7A6B);
         let mut run = Run {
@@ -348,7 +372,7 @@ impl Simulator {
             }
         };
         let steps = (settings.time_limit / control_period).ceil() as usize;
-        let mut push = [0.0, 0.0];
+        let mut push = [0.0; D];
         for k in 0..steps {
             let t = k as f64 * control_period;
             let position = tracker.position(&s);
@@ -391,7 +415,7 @@ impl Simulator {
             }
             let (mut period_clearance, mut period_error) = (f64::INFINITY, None::<f64>);
             let mut failure = None;
-            tracker.step(&mut s, &decision.control, push, control_period, settings.substeps, |x| {
+            tracker.step(&mut s, &decision.control, &push, control_period, settings.substeps, |x| {
                 let p = tracker.position(x);
                 let gap = clearance(&world.obstacles, p);
                 period_clearance = period_clearance.min(gap);
@@ -400,7 +424,7 @@ impl Simulator {
                     return false;
                 }
                 if let (Some(planner), Some(bound)) = (decision.planner, decision.bound) {
-                    let error = tracker.tracking_error(x, planner);
+                    let error = tracker.tracking_error(x, &planner);
                     period_error = Some(period_error.map_or(error, |e| e.max(error)));
                     let excess = error - bound;
                     run.worst_excess = Some(run.worst_excess.map_or(excess, |w| w.max(excess)));

@@ -2,7 +2,7 @@
 //! sTEB and the dTEB drawn along it, the sensing range, obstacles sensed and not), every method on one world
 //! (Fig. 4), and `beta`, clearance, tracking error and bound over time.
 
-use crate::episode::Run;
+use crate::episode::PlaneRun;
 use crate::world::PlaneWorld;
 use fastrack_lab::plot::{fonts_available, line_chart, Chart, Series};
 use fastrack_online::geometry::{Obstacle, PlaneObstacle, Point};
@@ -64,7 +64,7 @@ fn outline(obstacle: &PlaneObstacle) -> Vec<(f64, f64)> {
 }
 
 /// Obstacles of `world` some sample of `run` came within sensing range of.
-fn ever_sensed<'a>(world: &'a PlaneWorld, run: &Run) -> Vec<&'a PlaneObstacle> {
+fn ever_sensed<'a>(world: &'a PlaneWorld, run: &PlaneRun) -> Vec<&'a PlaneObstacle> {
     world
         .obstacles
         .iter()
@@ -116,7 +116,7 @@ fn world_chart<'r, 'b>(
 /// Draws one run through `world` into a 1100x760 PNG: the tracker's path coloured by `beta`, the planner
 /// dotted, the sTEB (green) and the dTEB (orange) around the planner every `every` seconds, the sensing
 /// range (dashed grey) at the same places, sensed obstacles dark, the others light, the goal green.
-pub fn trajectory(path: &Path, world: &PlaneWorld, run: &Run, beta_l: f64, every: f64) -> Result<(), String> {
+pub fn trajectory(path: &Path, world: &PlaneWorld, run: &PlaneRun, beta_l: f64, every: f64) -> Result<(), String> {
     let text = fonts_available();
     let root = BitMapBackend::new(path, (1100, 760)).into_drawing_area();
     let caption = format!("{}: {} after {:.1} s", run.method, run.outcome.label(), run.time);
@@ -157,7 +157,7 @@ pub fn trajectory(path: &Path, world: &PlaneWorld, run: &Run, beta_l: f64, every
 }
 
 /// Draws every run through the same `world` into one PNG, one colour per method (the paper's Fig. 4).
-pub fn methods_on_one_world(path: &Path, world: &PlaneWorld, runs: &[&Run]) -> Result<(), String> {
+pub fn methods_on_one_world(path: &Path, world: &PlaneWorld, runs: &[&PlaneRun]) -> Result<(), String> {
     let text = fonts_available();
     let root = BitMapBackend::new(path, (1100, 760)).into_drawing_area();
     let mut chart = world_chart(&root, world, "every method through one world", text)?;
@@ -189,8 +189,8 @@ pub fn methods_on_one_world(path: &Path, world: &PlaneWorld, runs: &[&Run]) -> R
 }
 
 /// `beta`, clearance, tracking error and the bound in force over time.
-pub fn over_time(path: &Path, run: &Run) -> Result<(), String> {
-    let series = |label: &str, f: &dyn Fn(&crate::episode::Sample) -> Option<f64>| Series {
+pub fn over_time(path: &Path, run: &PlaneRun) -> Result<(), String> {
+    let series = |label: &str, f: &dyn Fn(&crate::episode::Sample<2>) -> Option<f64>| Series {
         label: label.into(),
         points: run.samples.iter().filter_map(|s| f(s).map(|y| (s.t, y))).collect(),
         markers: false,
@@ -207,7 +207,7 @@ pub fn over_time(path: &Path, run: &Run) -> Result<(), String> {
 }
 
 /// Time to goal per world, one marker series per method (runs that did not reach the goal are left out).
-pub fn time_to_goal(path: &Path, methods: &[&str], runs_by_method: &[Vec<&Run>]) -> Result<(), String> {
+pub fn time_to_goal(path: &Path, methods: &[&str], runs_by_method: &[Vec<&PlaneRun>]) -> Result<(), String> {
     let drawn: Vec<Series> = methods
         .iter()
         .zip(runs_by_method)

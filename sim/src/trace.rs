@@ -9,17 +9,22 @@
 //! asked, the certified-set membership and the certificate's age.
 
 use fastrack_online::core::StepReport;
-use fastrack_online::geometry::{PlaneObstacle, Point};
+use fastrack_online::geometry::Point;
 use fastrack_online::online_loop::Branch;
+use serde::de::DeserializeOwned;
 use serde::{Deserialize, Serialize};
 use std::path::Path;
 
 /// The trace format's name and version.
 pub const FORMAT: &str = "fastrack-loop-trace/1";
 
-/// One run of the online loop, as given and as decided.
+/// One run of the online loop among obstacles `O` of a workspace of `D` axes, as given and as decided.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct LoopTrace {
+#[serde(bound(
+    serialize = "O: Serialize, [f64; D]: Serialize",
+    deserialize = "O: Deserialize<'de>, [f64; D]: Deserialize<'de>"
+))]
+pub struct LoopTrace<O, const D: usize> {
     /// [`FORMAT`].
     pub format: String,
     /// The model's name.
@@ -29,24 +34,28 @@ pub struct LoopTrace {
     /// Control period (s).
     pub control_period: f64,
     /// The goal.
-    pub goal: Point,
+    pub goal: Point<D>,
     /// The workspace, `[min, max]`.
-    pub bounds: [Point; 2],
+    pub bounds: [Point<D>; 2],
     /// Reset candidates per reset.
     pub reset_candidates: usize,
     /// The planner's initial state.
-    pub start: Point,
+    pub start: Point<D>,
     /// One entry per control period.
-    pub steps: Vec<TraceStep>,
+    pub steps: Vec<TraceStep<O, D>>,
 }
 
 /// One control period: what the loop was given and what it decided.
 #[derive(Debug, Clone, PartialEq, Serialize, Deserialize)]
-pub struct TraceStep {
+#[serde(bound(
+    serialize = "O: Serialize, [f64; D]: Serialize",
+    deserialize = "O: Deserialize<'de>, [f64; D]: Deserialize<'de>"
+))]
+pub struct TraceStep<O, const D: usize> {
     /// The tracker state at the period's start.
     pub tracker: Vec<f64>,
     /// Obstacles sensed for the first time at this period.
-    pub sensed: Vec<PlaneObstacle>,
+    pub sensed: Vec<O>,
     /// adjustPlannerControl's branch.
     pub branch: Branch,
     /// The `beta` in force before the step.
@@ -56,7 +65,7 @@ pub struct TraceStep {
     /// The bound in force over the period.
     pub dteb_radius: f64,
     /// The planner state after the step.
-    pub planner: Point,
+    pub planner: Point<D>,
     /// The raw path was planned again.
     pub replanned: bool,
     /// Questions asked of the model.
@@ -67,9 +76,9 @@ pub struct TraceStep {
     pub certificate_age: f64,
 }
 
-impl TraceStep {
+impl<O, const D: usize> TraceStep<O, D> {
     /// The step of `report`, given `tracker` and the newly sensed `sensed`.
-    pub fn new(tracker: &[f64], sensed: Vec<PlaneObstacle>, report: &StepReport<2>) -> Self {
+    pub fn new(tracker: &[f64], sensed: Vec<O>, report: &StepReport<D>) -> Self {
         Self {
             tracker: tracker.to_vec(),
             sensed,
@@ -86,7 +95,10 @@ impl TraceStep {
     }
 }
 
-impl LoopTrace {
+impl<O: Serialize + DeserializeOwned, const D: usize> LoopTrace<O, D>
+where
+    [f64; D]: Serialize + DeserializeOwned,
+{
     /// Writes the trace as JSON into `path`.
     pub fn write(&self, path: &Path) -> std::io::Result<()> {
         let text = serde_json::to_string(self).map_err(std::io::Error::other)?;

@@ -1,7 +1,7 @@
 //! The tracker's true dynamics, from the shared system definition, integrated by RK4 with the control held
 //! over each control period and checked at every sub-step; and the range sensor.
 
-use fastrack_online::geometry::{Obstacle, PlaneObstacle, Point};
+use fastrack_online::geometry::{Obstacle, Point};
 use fastrack_valuefn::simulation::rk4;
 use fastrack_valuefn::system::{AffineSystem, Factor, StateSpace};
 use rand::rngs::StdRng;
@@ -11,7 +11,8 @@ use rand::Rng;
 ///
 /// Its dynamics are the system's relative dynamics with the planner at rest: with `p` constant,
 /// `s' = r' = f(s) + G_u u`, which holds when the drift reads none of the coordinates the planner moves
-/// (the rows of `Q`), as for dubins4d, whose drift reads only the heading and the speed.
+/// (the rows of `Q`), as for dubins4d, whose drift reads only the heading and the speed, and quad10d, whose
+/// drift reads velocities and tilts. Positions have as many axes as the system's planner (2 or 3).
 #[derive(Debug, Clone)]
 pub struct Tracker {
     system: AffineSystem,
@@ -21,15 +22,15 @@ pub struct Tracker {
 impl Tracker {
     /// The tracker of `system`, or why it cannot be simulated this way.
     pub fn new(system: AffineSystem) -> Result<Self, String> {
-        if system.planner_dim() != 2 {
+        let dim = system.planner_dim();
+        if !(dim == 2 || dim == 3) {
             return Err(format!(
-                "system {} has a {}-D planner; the simulator is planar",
-                system.id,
-                system.planner_dim()
+                "system {} has a {dim}-D planner; the simulator flies in the plane or in space",
+                system.id
             ));
         }
         let moved: Vec<usize> =
-            (0..system.n_state()).filter(|&i| (0..2).any(|j| system.planner_to_state[(i, j)] != 0.0)).collect();
+            (0..system.n_state()).filter(|&i| (0..dim).any(|j| system.planner_to_state[(i, j)] != 0.0)).collect();
         let reads = |f: &Factor| match *f {
             Factor::Linear(j) | Factor::Sin(j) | Factor::Cos(j) | Factor::Tan(j) => j,
         };
@@ -48,27 +49,49 @@ impl Tracker {
         &self.system
     }
 
-    /// The tracker's position in the planner's plane, `Q^T s`.
-    pub fn position(&self, s: &[f64]) -> Point {
+    /// Axes of the planner's position space: 2 or 3.
+    pub fn dim(&self) -> usize {
+        self.system.planner_dim()
+    }
+
+    /// The tracker's position in the planner's position space, `Q^T s` (`D` must be [`Tracker::dim`]).
+    pub fn position<const D: usize>(&self, s: &[f64]) -> Point<D> {
         let q = &self.space.planner_to_state;
-        [0, 1].map(|j| (0..s.len()).map(|i| q[(i, j)] * s[i]).sum())
+        std::array::from_fn(|j| (0..s.len()).map(|i| q[(i, j)] * s[i]).sum())
     }
 
     /// The relative state `s - Q p`, periodic coordinates wrapped.
-    pub fn relative_state(&self, s: &[f64], p: Point) -> Vec<f64> {
-        self.space.relative_state(s, &p)
+    pub fn relative_state(&self, s: &[f64], p: &[f64]) -> Vec<f64> {
+        self.space.relative_state(s, p)
     }
 
     /// The tracking error `l(s - Q p)`.
-    pub fn tracking_error(&self, s: &[f64], p: Point) -> f64 {
+    pub fn tracking_error(&self, s: &[f64], p: &[f64]) -> f64 {
         self.space.tracking_error(&self.relative_state(s, p))
     }
 
-    /// A state at `position` with the named coordinates set (dubins4d: `theta`, `v`), the rest zero.
-    pub fn initial_state(&self, position: Point, named: &[(&str, f64)]) -> Result<Vec<f64>, String> {
+    /// A state at `position` moving at `speed` along `heading` in the ground plane (0 along +y, pi/2 along
+    /// +x), the rest zero: a system with a heading `theta` and a speed `v` (dubins4d) takes them; one with
+    /// velocities `v_x`, `v_y` (quad10d) takes the velocity's components.
+    pub fn initial_state(&self, position: &[f64], heading: f64, speed: f64) -> Result<Vec<f64>, String> {
+        let has = |name: &str| self.system.state.iter().any(|d| d.name == name);
+        if has("theta") && has("v") {
+            self.state_at(position, &[("theta", heading), ("v", speed)])
+        } else if has("v_x") && has("v_y") {
+            self.state_at(position, &[("v_x", speed * heading.sin()), ("v_y", speed * heading.cos())])
+        } else {
+            Err(format!(
+                "system {} has neither a heading and speed nor ground velocities to start with",
+                self.system.id
+            ))
+        }
+    }
+
+    /// A state at `position` with the named coordinates set, the rest zero.
+    fn state_at(&self, position: &[f64], named: &[(&str, f64)]) -> Result<Vec<f64>, String> {
         let q = &self.space.planner_to_state;
         let mut s: Vec<f64> =
-            (0..self.system.n_state()).map(|i| q[(i, 0)] * position[0] + q[(i, 1)] * position[1]).collect();
+            (0..self.system.n_state()).map(|i| (0..position.len()).map(|j| q[(i, j)] * position[j]).sum()).collect();
         for (name, value) in named {
             let i = self
                 .system
@@ -88,7 +111,7 @@ impl Tracker {
         &self,
         s: &mut [f64],
         control: &[f64],
-        push: Point,
+        push: &[f64],
         dt: f64,
         substeps: usize,
         mut check: impl FnMut(&[f64]) -> bool,
@@ -101,7 +124,7 @@ impl Tracker {
             rk4(s, h, |x, out| {
                 self.system.dynamics(x, control, &at_rest, &no_disturbance, out);
                 for (i, o) in out.iter_mut().enumerate() {
-                    *o += q[(i, 0)] * push[0] + q[(i, 1)] * push[1];
+                    *o += (0..push.len()).map(|j| q[(i, j)] * push[j]).sum::<f64>();
                 }
             });
             self.space.wrap(s);
@@ -125,11 +148,11 @@ pub struct Disturbance {
 
 impl Disturbance {
     /// The push for the next period.
-    pub fn draw(&self, rng: &mut StdRng) -> Point {
+    pub fn draw<const D: usize>(&self, rng: &mut StdRng) -> Point<D> {
         if self.bound <= 0.0 {
-            return [0.0, 0.0];
+            return [0.0; D];
         }
-        [rng.random_range(-self.bound..=self.bound), rng.random_range(-self.bound..=self.bound)]
+        std::array::from_fn(|_| rng.random_range(-self.bound..=self.bound))
     }
 }
 
@@ -142,7 +165,7 @@ pub struct RangeSensor {
 
 impl RangeSensor {
     /// The obstacles of `world` within range of `position`.
-    pub fn sense(&self, obstacles: &[PlaneObstacle], position: Point) -> Vec<PlaneObstacle> {
+    pub fn sense<O: Obstacle<D>, const D: usize>(&self, obstacles: &[O], position: Point<D>) -> Vec<O> {
         obstacles.iter().filter(|o| o.distance(position) <= self.range).cloned().collect()
     }
 }
@@ -150,27 +173,58 @@ impl RangeSensor {
 #[cfg(test)]
 mod tests {
     use super::*;
-    use fastrack_valuefn::system::dubins4d;
+    use fastrack_online::geometry::PlaneObstacle;
+    use fastrack_valuefn::system::{dubins4d, quad10d};
 
     #[test]
     fn dubins4d_drives_straight_and_turns_as_its_equations_say() {
         let tracker = Tracker::new(dubins4d::system()).unwrap();
-        let mut s = tracker.initial_state([1.0, 2.0], &[("theta", std::f64::consts::FRAC_PI_2), ("v", 1.0)]).unwrap();
+        let mut s = tracker.initial_state(&[1.0, 2.0], std::f64::consts::FRAC_PI_2, 1.0).unwrap();
         assert_eq!(tracker.position(&s), [1.0, 2.0]);
         // Heading pi/2 is along +x; 1 s at 1 m/s with no control.
-        tracker.step(&mut s, &[0.0, 0.0], [0.0, 0.0], 1.0, 10, |_| true);
+        tracker.step(&mut s, &[0.0, 0.0], &[0.0, 0.0], 1.0, 10, |_| true);
         assert!((s[0] - 2.0).abs() < 1e-9 && (s[1] - 2.0).abs() < 1e-9, "{s:?}");
         // A full turn at omega = 2 pi / T returns to the start (circle of radius v T / 2 pi).
         let period = 4.0;
-        tracker.step(&mut s, &[std::f64::consts::TAU / period, 0.0], [0.0, 0.0], period, 400, |_| true);
+        tracker.step(&mut s, &[std::f64::consts::TAU / period, 0.0], &[0.0, 0.0], period, 400, |_| true);
         assert!((s[0] - 2.0).abs() < 1e-6 && (s[1] - 2.0).abs() < 1e-6, "{s:?}");
         // The check stops the integration.
         let mut calls = 0;
-        assert!(!tracker.step(&mut s, &[0.0, 0.0], [0.0, 0.0], 1.0, 10, |_| {
+        assert!(!tracker.step(&mut s, &[0.0, 0.0], &[0.0, 0.0], 1.0, 10, |_| {
             calls += 1;
             calls < 3
         }));
         assert_eq!(calls, 3);
+    }
+
+    #[test]
+    fn quad10d_hovers_coasts_and_falls_as_its_equations_say() {
+        let tracker = Tracker::new(quad10d::system()).unwrap();
+        assert_eq!(tracker.dim(), 3);
+        // Heading pi/2 is along +x: v_x = 1, v_y = 0 (to rounding), level, at rest vertically.
+        let mut s = tracker.initial_state(&[1.0, 2.0, 3.0], std::f64::consts::FRAC_PI_2, 1.0).unwrap();
+        assert_eq!(tracker.position(&s), [1.0, 2.0, 3.0]);
+        assert!((s[1] - 1.0).abs() < 1e-12 && s[5].abs() < 1e-12, "{s:?}");
+        // Hover thrust (k_T u_z = g) and no tilt command: 1 s coasting along x, the height held.
+        let hover = quad10d::GRAVITY / quad10d::K_T;
+        tracker.step(&mut s, &[0.0, 0.0, hover], &[0.0; 3], 1.0, 20, |_| true);
+        let p: [f64; 3] = tracker.position(&s);
+        assert!((p[0] - 2.0).abs() < 1e-9 && (p[1] - 2.0).abs() < 1e-9 && (p[2] - 3.0).abs() < 1e-9, "{p:?}");
+        // No thrust: free fall, g t^2 / 2 in 0.5 s (RK4 is exact on a quadratic).
+        tracker.step(&mut s, &[0.0, 0.0, 0.0], &[0.0; 3], 0.5, 10, |_| true);
+        let fallen = 3.0 - tracker.position::<3>(&s)[2];
+        assert!((fallen - quad10d::GRAVITY * 0.125).abs() < 1e-9, "fell {fallen} m");
+        // A push moves every axis of the position.
+        let before: [f64; 3] = tracker.position(&s);
+        let mut pushed = s.clone();
+        tracker.step(&mut pushed, &[0.0, 0.0, 0.0], &[0.0, 0.0, 1.0], 0.5, 10, |_| true);
+        let extra = tracker.position::<3>(&pushed)[2]
+            - tracker.position::<3>(&{
+                let mut free = s.clone();
+                tracker.step(&mut free, &[0.0, 0.0, 0.0], &[0.0; 3], 0.5, 10, |_| true);
+                free
+            })[2];
+        assert!((extra - 0.5).abs() < 1e-9 && before[2] < 3.0, "pushed {extra} m up");
     }
 
     #[test]

@@ -9,7 +9,7 @@
 use fastrack_e2e::TestServer;
 use fastrack_lab::record::{write_record, MarkdownTable};
 use fastrack_sim::backend::Backend;
-use fastrack_sim::episode::{Run, RunSettings, Simulator};
+use fastrack_sim::episode::{PlaneRun, RunSettings, Simulator};
 use fastrack_sim::in_process::LocalModel;
 use fastrack_sim::methods::Method;
 use fastrack_sim::world::{PlaneWorld, WorldSpec};
@@ -21,7 +21,7 @@ const WORLDS: u64 = 10;
 const BUNDLE: &str = "dubins4d/4";
 
 /// Control periods per second over every run of `method` on `worlds`, and the runs.
-async fn rate(simulator: &Simulator, worlds: &[PlaneWorld], method: &Method) -> anyhow::Result<(f64, Vec<Run>)> {
+async fn rate(simulator: &Simulator, worlds: &[PlaneWorld], method: &Method) -> anyhow::Result<(f64, Vec<PlaneRun>)> {
     let started = Instant::now();
     let mut runs = Vec::with_capacity(worlds.len());
     for (i, world) in worlds.iter().enumerate() {

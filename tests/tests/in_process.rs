@@ -4,12 +4,13 @@
 //! folder named; a run's golden trace of the online loop records every period and reads back.
 
 use fastrack_e2e::TestServer;
+use fastrack_online::geometry::PlaneObstacle;
 use fastrack_sim::backend::Backend;
-use fastrack_sim::episode::{Outcome, Run, RunSettings, Simulator};
+use fastrack_sim::episode::{Outcome, PlaneRun, RunSettings, Simulator};
 use fastrack_sim::in_process::LocalModel;
 use fastrack_sim::methods::Method;
 use fastrack_sim::trace::{LoopTrace, FORMAT};
-use fastrack_sim::world::WorldSpec;
+use fastrack_sim::world::{PlaneWorld, WorldSpec};
 use std::path::{Path, PathBuf};
 
 fn models() -> PathBuf {
@@ -27,7 +28,7 @@ fn shipped_bundle() -> PathBuf {
     folder.join(version.to_string())
 }
 
-fn assert_same(service: &Run, local: &Run, what: &str) {
+fn assert_same(service: &PlaneRun, local: &PlaneRun, what: &str) {
     assert_eq!(service.outcome, local.outcome, "{what}: outcome");
     assert_eq!(service.samples.len(), local.samples.len(), "{what}: control periods");
     for (k, (a, b)) in service.samples.iter().zip(&local.samples).enumerate() {
@@ -50,7 +51,8 @@ async fn runs_answered_in_process_equal_runs_over_the_server() {
     assert_eq!(service.speeds(), in_process.speeds(), "the same table");
     let mut reached = 0;
     for seed in 1..=3u64 {
-        let world = WorldSpec { seed, inflation: service.steb_radius(), ..WorldSpec::default() }.generate().unwrap();
+        let world: PlaneWorld =
+            WorldSpec { seed, inflation: service.steb_radius(), ..WorldSpec::default() }.generate().unwrap();
         for method in [Method::Parametric, Method::MetaFastrack { levels: 3, quickest: false }] {
             let what = format!("{} on world {seed}", method.label());
             let a = service.run(&world, &method, seed).await.unwrap();
@@ -84,7 +86,8 @@ async fn a_golden_trace_records_every_period_and_reads_back() {
     let local = LocalModel::load(&shipped_bundle(), None, 1).unwrap();
     let settings = RunSettings { trace: true, ..RunSettings::default() };
     let simulator = Simulator::new(Backend::InProcess(local), settings).await.unwrap();
-    let world = WorldSpec { seed: 2, inflation: simulator.steb_radius(), ..WorldSpec::default() }.generate().unwrap();
+    let world: PlaneWorld =
+        WorldSpec { seed: 2, inflation: simulator.steb_radius(), ..WorldSpec::default() }.generate().unwrap();
     let run = simulator.run(&world, &Method::Parametric, 2).await.unwrap();
     let trace = run.trace.clone().expect("PF's run carries its trace");
     assert_eq!((trace.format.as_str(), trace.start, trace.goal), (FORMAT, world.start, world.goal));
@@ -106,7 +109,7 @@ async fn a_golden_trace_records_every_period_and_reads_back() {
     trace.write(&path).unwrap();
     assert_eq!(LoopTrace::read(&path).unwrap(), trace);
     std::fs::write(&path, r#"{"format": "another/1"}"#).unwrap();
-    let error = LoopTrace::read(&path).unwrap_err();
+    let error = LoopTrace::<PlaneObstacle, 2>::read(&path).unwrap_err();
     assert!(error.contains("trace.json"), "{error}");
     // The baselines keep no trace.
     let mf = simulator.run(&world, &Method::MetaFastrack { levels: 3, quickest: false }, 2).await.unwrap();

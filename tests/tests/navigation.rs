@@ -5,7 +5,7 @@
 
 use fastrack_e2e::{binary, run_binary, TestServer};
 use fastrack_sim::bench::{summarise, table, time_ratio};
-use fastrack_sim::episode::{Outcome, Run, RunSettings, Simulator};
+use fastrack_sim::episode::{Outcome, PlaneRun, RunSettings, Simulator};
 use fastrack_sim::methods::{Method, MppiSettings};
 use fastrack_sim::world::{PlaneWorld, WorldFamily, WorldSpec};
 use std::path::Path;
@@ -58,7 +58,7 @@ async fn parametric_fastrack_reaches_every_goal_safely_on_twenty_worlds() {
         assert!((0.0..=1.0).contains(&above) && done.share_above(beta_u) == 0.0, "world {}: {above}", i + 1);
         runs.push(done);
     }
-    let all: Vec<&Run> = runs.iter().collect();
+    let all: Vec<&PlaneRun> = runs.iter().collect();
     let summary = summarise("PF", &all);
     println!("{}", table(std::slice::from_ref(&summary)).to_markdown());
     assert_eq!((summary.reached, summary.collided, summary.bound_exceeded), (WORLDS as usize, 0, 0));
@@ -80,7 +80,7 @@ async fn parametric_fastrack_reaches_every_goal_safely_on_twenty_worlds() {
 async fn the_baselines_run_the_same_worlds_and_the_bounded_ones_stay_safe() {
     let (_server, simulator) = shipped().await;
     let worlds = worlds(3, simulator.steb_radius());
-    let mut by_method: Vec<(Method, Vec<Run>)> = Vec::new();
+    let mut by_method: Vec<(Method, Vec<PlaneRun>)> = Vec::new();
     for method in Method::all() {
         let mut runs = Vec::new();
         for (i, world) in worlds.iter().enumerate() {
@@ -197,7 +197,8 @@ async fn every_world_family_is_driven_safely_by_parametric_fastrack_on_both_path
     let mut unsafe_runs = Vec::new();
     for family in WorldFamily::ALL {
         for seed in 1..=2 {
-            let world = WorldSpec { seed, family, inflation: steb, ..WorldSpec::default() }.generate().unwrap();
+            let world: PlaneWorld =
+                WorldSpec { seed, family, inflation: steb, ..WorldSpec::default() }.generate().unwrap();
             for method in [
                 Method::Parametric,
                 Method::ParametricFastestPath,

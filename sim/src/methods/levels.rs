@@ -7,34 +7,36 @@
 //! a pending switch and reading the control share one call.
 
 use super::{Context, Decision, MethodError, TimedPlanner};
+use crate::world::{feasibility_cell, WorldObstacle};
 use fastrack_online::core::Answer;
-use fastrack_online::geometry::{clearance, remember, PlaneObstacle, Point};
+use fastrack_online::geometry::{chebyshev_norm, clearance, remember, sub, Point};
 use fastrack_online::raw_path::{advance_along, GridAStar, PlanError, PlanRequest, RawPathPlanner};
 use fastrack_proto::planner_speed::{SpeedRow, SpeedRule};
 use std::collections::VecDeque;
 
 /// FaSTrack over fixed levels, running.
-pub struct LevelPlanner {
-    context: Context,
+pub struct LevelPlanner<O, const D: usize> {
+    context: Context<O, D>,
     /// The levels, slowest first: table rows.
     levels: Vec<SpeedRow>,
     /// The level in use.
     current: usize,
     /// A slower level waiting for the tracker to enter its bound, with its path.
-    pending: Option<(usize, VecDeque<Point>)>,
-    planner: Point,
-    path: VecDeque<Point>,
-    obstacles: Vec<PlaneObstacle>,
+    pending: Option<(usize, VecDeque<Point<D>>)>,
+    planner: Point<D>,
+    path: VecDeque<Point<D>>,
+    obstacles: Vec<O>,
     replan: bool,
-    path_planner: TimedPlanner<PlaneObstacle, 2>,
+    path_planner: TimedPlanner<O, D>,
     /// Choose the level by its path's travel time, not by its speed.
     quickest: bool,
 }
 
-impl LevelPlanner {
+impl<O: WorldObstacle<D>, const D: usize> LevelPlanner<O, D> {
     /// The levels `rows` (indices into the model's table, slowest first) with the planner at `start`; the
-    /// fastest level first; `quickest` chooses each replan's level by its path's travel time.
-    pub fn new(context: Context, rows: Vec<usize>, start: Point, quickest: bool) -> Self {
+    /// fastest level first; `quickest` chooses each replan's level by its path's travel time. A* runs on
+    /// cells of the world's feasibility grid (0.1 m squares, 0.25 m cubes).
+    pub fn new(context: Context<O, D>, rows: Vec<usize>, start: Point<D>, quickest: bool) -> Self {
         let levels: Vec<SpeedRow> = rows.iter().map(|&i| context.speeds[i]).collect();
         Self {
             current: levels.len() - 1,
@@ -45,13 +47,13 @@ impl LevelPlanner {
             path: VecDeque::new(),
             obstacles: Vec::new(),
             replan: true,
-            path_planner: TimedPlanner::new(Box::new(GridAStar::default())),
+            path_planner: TimedPlanner::new(Box::new(GridAStar { cell: feasibility_cell::<D>() })),
             quickest,
         }
     }
 
     /// The raw path ahead of the planner.
-    pub fn raw_path(&self) -> Vec<Point> {
+    pub fn raw_path(&self) -> Vec<Point<D>> {
         self.path.iter().copied().collect()
     }
 
@@ -59,7 +61,7 @@ impl LevelPlanner {
     /// farther than the level's bound from every obstacle (the tracker may lie anywhere within the bound of
     /// it); a planner closer than that (at a start in clutter, or beside an obstacle sensed late) has no
     /// path at this level, though the path planner could lead it out.
-    fn plan(&mut self, level: usize) -> Result<VecDeque<Point>, PlanError> {
+    fn plan(&mut self, level: usize) -> Result<VecDeque<Point<D>>, PlanError> {
         let inflation = self.levels[level].bound;
         if clearance(&self.obstacles, self.planner) <= inflation {
             return Err(PlanError::NoPath {
@@ -82,8 +84,8 @@ impl LevelPlanner {
 
     /// The level to plan with and its path: the fastest level with a path, or with `quickest` the level whose
     /// path takes the least time at its speed (each axis at most `beta` per second).
-    fn choose(&mut self) -> Result<(usize, VecDeque<Point>), MethodError> {
-        let mut chosen: Option<(usize, VecDeque<Point>, f64)> = None;
+    fn choose(&mut self) -> Result<(usize, VecDeque<Point<D>>), MethodError> {
+        let mut chosen: Option<(usize, VecDeque<Point<D>>, f64)> = None;
         for level in (0..self.levels.len()).rev() {
             match self.plan(level) {
                 Ok(path) => {
@@ -104,12 +106,8 @@ impl LevelPlanner {
 
     /// The path's length from the planner on, each segment counted by its larger axis displacement (what a
     /// per-axis speed bound makes it cost).
-    fn chebyshev_length(&self, path: &VecDeque<Point>) -> f64 {
-        std::iter::once(&self.planner)
-            .chain(path)
-            .zip(path)
-            .map(|(a, b)| (b[0] - a[0]).abs().max((b[1] - a[1]).abs()))
-            .sum()
+    fn chebyshev_length(&self, path: &VecDeque<Point<D>>) -> f64 {
+        std::iter::once(&self.planner).chain(path).zip(path).map(|(a, b)| chebyshev_norm(sub(*b, *a))).sum()
     }
 
     /// Value, membership and control at relative state `r` under level `level`'s `beta`.
@@ -120,7 +118,7 @@ impl LevelPlanner {
     }
 
     /// One control period.
-    pub async fn step(&mut self, tracker: &[f64], sensed: &[PlaneObstacle]) -> Result<Decision, MethodError> {
+    pub async fn step(&mut self, tracker: &[f64], sensed: &[O]) -> Result<Decision<D>, MethodError> {
         let replanned = remember(&mut self.obstacles, sensed) || self.replan;
         if replanned {
             self.replan = false;
@@ -137,7 +135,7 @@ impl LevelPlanner {
             // Under the current level's own control a Dubins car circles a still planner outside the
             // smaller set and the switch never happens.
             Some((level, path)) => {
-                let r = self.context.tracker.relative_state(tracker, self.planner);
+                let r = self.context.tracker.relative_state(tracker, &self.planner);
                 let answer = self.answer(&r, level).await?;
                 if answer.in_set {
                     (self.current, self.path) = (level, path);
@@ -149,7 +147,7 @@ impl LevelPlanner {
             None => {
                 let budget = self.levels[self.current].beta * self.context.control_period;
                 let p_next = advance_along(self.planner, &mut self.path, budget);
-                let r = self.context.tracker.relative_state(tracker, p_next);
+                let r = self.context.tracker.relative_state(tracker, &p_next);
                 let answer = self.answer(&r, self.current).await?;
                 (p_next, answer.control, answer.in_domain)
             }

@@ -16,8 +16,8 @@ use crate::backend::Backend;
 use crate::trace::LoopTrace;
 use crate::tracker::Tracker;
 use crate::visits::Visit;
-use crate::world::PlaneWorld;
-use fastrack_online::geometry::{PlaneObstacle, Point};
+use crate::world::{World, WorldObstacle};
+use fastrack_online::geometry::Point;
 use fastrack_proto::planner_speed::{SpeedRow, SpeedRule};
 use std::sync::Arc;
 use std::time::Duration;
@@ -100,13 +100,13 @@ impl Method {
     }
 }
 
-/// What a method decided for one control period.
+/// What a method decided for one control period, in a workspace of `D` axes.
 #[derive(Debug, Clone, PartialEq)]
-pub struct Decision {
+pub struct Decision<const D: usize> {
     /// The control held over the period.
     pub control: Vec<f64>,
     /// The planner state the tracker follows (`None`: no planner, MPPI).
-    pub planner: Option<Point>,
+    pub planner: Option<Point<D>>,
     /// The planner speed bound in use.
     pub beta: Option<f64>,
     /// The tracking error bound in force over the period (`None`: none, MPPI).
@@ -149,9 +149,8 @@ pub enum MethodError {
     Setup(String),
 }
 
-/// What every method knows of the model and the run.
-#[derive(Clone)]
-pub struct Context {
+/// What every method knows of the model and the run through a world of obstacles `O` and `D` axes.
+pub struct Context<O, const D: usize> {
     /// Where the answers about the model come from.
     pub backend: Backend,
     /// The model's name.
@@ -167,7 +166,7 @@ pub struct Context {
     /// The simulated tracker (dynamics, relative states).
     pub tracker: Arc<Tracker>,
     /// The world's goal and workspace.
-    pub world: Arc<PlaneWorld>,
+    pub world: Arc<World<O, D>>,
     /// Control period (s).
     pub control_period: f64,
     /// Seed of the method's own randomness.
@@ -175,18 +174,18 @@ pub struct Context {
 }
 
 /// A running method.
-pub enum Controller {
+pub enum Controller<O, const D: usize> {
     /// Parametric FaSTrack.
-    Parametric(Box<Parametric>),
+    Parametric(Box<Parametric<O, D>>),
     /// FaSTrack or Meta-FaSTrack.
-    Levels(Box<LevelPlanner>),
+    Levels(Box<LevelPlanner<O, D>>),
     /// MPPI.
-    Mppi(Box<Mppi>),
+    Mppi(Box<Mppi<O, D>>),
 }
 
-impl Controller {
+impl<O: WorldObstacle<D>, const D: usize> Controller<O, D> {
     /// Starts `method` with the tracker at `tracker` (the planner starts at the tracker's position).
-    pub async fn start(method: &Method, context: Context, tracker: &[f64]) -> Result<Self, MethodError> {
+    pub async fn start(method: &Method, context: Context<O, D>, tracker: &[f64]) -> Result<Self, MethodError> {
         let start = context.tracker.position(tracker);
         let last = context.speeds.len() - 1;
         Ok(match method {
@@ -215,7 +214,7 @@ impl Controller {
     }
 
     /// The decision for the control period starting at tracker state `tracker`, with `sensed` obstacles.
-    pub async fn step(&mut self, tracker: &[f64], sensed: &[PlaneObstacle]) -> Result<Decision, MethodError> {
+    pub async fn step(&mut self, tracker: &[f64], sensed: &[O]) -> Result<Decision<D>, MethodError> {
         match self {
             Controller::Parametric(method) => method.step(tracker, sensed).await,
             Controller::Levels(method) => method.step(tracker, sensed).await,
@@ -224,7 +223,7 @@ impl Controller {
     }
 
     /// The online loop's trace of the run so far, if one was recorded (Parametric FaSTrack).
-    pub fn take_trace(&mut self) -> Option<LoopTrace> {
+    pub fn take_trace(&mut self) -> Option<LoopTrace<O, D>> {
         match self {
             Controller::Parametric(method) => method.take_trace(),
             Controller::Levels(_) | Controller::Mppi(_) => None,
@@ -232,7 +231,7 @@ impl Controller {
     }
 
     /// The raw path still ahead of the planner (empty for MPPI).
-    pub fn raw_path(&self) -> Vec<Point> {
+    pub fn raw_path(&self) -> Vec<Point<D>> {
         match self {
             Controller::Parametric(method) => method.raw_path(),
             Controller::Levels(method) => method.raw_path(),

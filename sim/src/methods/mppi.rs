@@ -9,7 +9,8 @@
 //! 2 rad/s on the turn rate and 0.5 m/s^2 on the acceleration (40% and 50% of their ranges).
 
 use super::{Context, Decision, MethodError};
-use fastrack_online::geometry::{clearance, norm, remember, sub, PlaneObstacle};
+use crate::world::WorldObstacle;
+use fastrack_online::geometry::{clearance, norm, remember, sub, Point};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 
@@ -53,20 +54,20 @@ impl Default for MppiSettings {
 }
 
 /// MPPI, running.
-pub struct Mppi {
-    context: Context,
+pub struct Mppi<O, const D: usize> {
+    context: Context<O, D>,
     settings: MppiSettings,
     /// The nominal control sequence, `horizon x n_control`.
     nominal: Vec<Vec<f64>>,
     /// Control periods left before the next plan.
     until_plan: usize,
-    obstacles: Vec<PlaneObstacle>,
+    obstacles: Vec<O>,
     rng: StdRng,
 }
 
-impl Mppi {
+impl<O: WorldObstacle<D>, const D: usize> Mppi<O, D> {
     /// MPPI with `settings`, checked.
-    pub fn new(context: Context, settings: MppiSettings) -> Result<Self, MethodError> {
+    pub fn new(context: Context<O, D>, settings: MppiSettings) -> Result<Self, MethodError> {
         let n_control = context.tracker.system().n_control();
         let positive = |x: f64| x.is_finite() && x > 0.0;
         if settings.samples == 0
@@ -91,7 +92,7 @@ impl Mppi {
     }
 
     /// One control period: plan again when due, apply the nominal sequence's first control.
-    pub fn step(&mut self, tracker: &[f64], sensed: &[PlaneObstacle]) -> Result<Decision, MethodError> {
+    pub fn step(&mut self, tracker: &[f64], sensed: &[O]) -> Result<Decision<D>, MethodError> {
         let replanned = remember(&mut self.obstacles, sensed);
         if self.until_plan == 0 {
             self.plan(tracker);
@@ -155,8 +156,8 @@ impl Mppi {
         let mut cost = 0.0;
         for (t, eps) in noise.iter().enumerate() {
             let u: Vec<f64> = (0..lo.len()).map(|j| (self.nominal[t][j] + eps[j]).clamp(lo[j], hi[j])).collect();
-            model.step(&mut x, &u, [0.0, 0.0], settings.step, 1, |_| true);
-            let position = model.position(&x);
+            model.step(&mut x, &u, &[0.0; D], settings.step, 1, |_| true);
+            let position: Point<D> = model.position(&x);
             let gap = clearance(&self.obstacles, position);
             cost += settings.goal_weight * norm(sub(position, goal));
             cost += if gap <= 0.0 {

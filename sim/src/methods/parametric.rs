@@ -6,25 +6,32 @@ use super::{Context, Decision, MethodError, TimedPlanner};
 use crate::backend::BackendOracle;
 use crate::trace::{LoopTrace, TraceStep, FORMAT};
 use crate::visits::Visit;
+use crate::world::{feasibility_cell, WorldObstacle};
 use fastrack_online::core::{CoreSettings, DEFAULT_RESET_CANDIDATES};
 use fastrack_online::fastest_path::FastestPath;
-use fastrack_online::geometry::{PlaneObstacle, Point};
+use fastrack_online::geometry::Point;
 use fastrack_online::online_loop::{Branch, OnlineLoop};
 use fastrack_online::raw_path::{GridAStar, RawPathPlanner};
 use fastrack_proto::planner_speed::SpeedRule;
 
 /// Parametric FaSTrack, running.
-pub struct Parametric {
-    online: OnlineLoop<PlaneObstacle, 2, BackendOracle>,
-    planner: TimedPlanner<PlaneObstacle, 2>,
+pub struct Parametric<O, const D: usize> {
+    online: OnlineLoop<O, D, BackendOracle>,
+    planner: TimedPlanner<O, D>,
     /// The run's trace, when the context asks for one.
-    trace: Option<LoopTrace>,
+    trace: Option<LoopTrace<O, D>>,
 }
 
-impl Parametric {
+impl<O: WorldObstacle<D>, const D: usize> Parametric<O, D> {
     /// Opens the loop's oracle (over the service: its `Track` stream) with the planner at `start`, planning
-    /// the fastest raw path when `fastest` (else the shortest), `beta` picked by `rule`.
-    pub async fn start(context: Context, start: Point, fastest: bool, rule: SpeedRule) -> Result<Self, MethodError> {
+    /// the fastest raw path when `fastest` (else the shortest), `beta` picked by `rule`; A* on cells of the
+    /// world's feasibility grid (0.1 m squares, 0.25 m cubes).
+    pub async fn start(
+        context: Context<O, D>,
+        start: Point<D>,
+        fastest: bool,
+        rule: SpeedRule,
+    ) -> Result<Self, MethodError> {
         if (fastest || rule != SpeedRule::HalfDistance) && context.trace {
             return Err(MethodError::Setup(
                 "a loop trace is recorded with the shortest-path planner and the paper's rule (the Python port \
@@ -52,19 +59,20 @@ impl Parametric {
             start,
             steps: Vec::new(),
         });
-        let planner: Box<dyn RawPathPlanner<PlaneObstacle, 2>> =
-            if fastest { Box::new(FastestPath::default()) } else { Box::new(GridAStar::default()) };
+        let cell = feasibility_cell::<D>();
+        let planner: Box<dyn RawPathPlanner<O, D>> =
+            if fastest { Box::new(FastestPath { cell }) } else { Box::new(GridAStar { cell }) };
         let planner = TimedPlanner::new(planner);
         Ok(Self { online: OnlineLoop::new(oracle, settings, start)?, planner, trace })
     }
 
     /// The run's trace so far (`None` unless the context asked for one).
-    pub fn take_trace(&mut self) -> Option<LoopTrace> {
+    pub fn take_trace(&mut self) -> Option<LoopTrace<O, D>> {
         self.trace.take()
     }
 
     /// One step of Alg. 3.
-    pub async fn step(&mut self, tracker: &[f64], sensed: &[PlaneObstacle]) -> Result<Decision, MethodError> {
+    pub async fn step(&mut self, tracker: &[f64], sensed: &[O]) -> Result<Decision<D>, MethodError> {
         let mut new = Vec::new();
         if self.trace.is_some() {
             for obstacle in sensed {
@@ -94,7 +102,7 @@ impl Parametric {
     }
 
     /// The raw path ahead of the planner.
-    pub fn raw_path(&self) -> Vec<Point> {
+    pub fn raw_path(&self) -> Vec<Point<D>> {
         self.online.raw_path().copied().collect()
     }
 }

@@ -233,7 +233,7 @@ impl<O: WorldObstacle<D>, const D: usize> World<O, D> {
 
 /// The grid cell A* checks a world's feasibility (and places its pop-ups) on: 0.1 m in the plane, 0.25 m in
 /// space, where a 0.1 m grid of a 30 x 20 x 6 m world would hold 3.6 million cells.
-pub(crate) fn feasibility_cell<const D: usize>() -> f64 {
+pub fn feasibility_cell<const D: usize>() -> f64 {
     if D == 2 {
         0.1
     } else {

@@ -5,11 +5,12 @@ use anyhow::Context as _;
 use fastrack_client::FastrackClient;
 use fastrack_lab::record::write_record;
 use fastrack_lab::shard::Shard;
+use fastrack_online::geometry::PlaneObstacle;
 use fastrack_sim::bench::{
     beta_share_table, paper_comparison, summarise, summary_json, table, time_ratio, BenchPart, BenchRun, Summary,
     FIGURE_WORLD, PART_STEM,
 };
-use fastrack_sim::episode::Run;
+use fastrack_sim::episode::PlaneRun;
 use fastrack_sim::methods::Method;
 use fastrack_sim::plot::{methods_on_one_world, time_to_goal};
 use fastrack_sim::visits::write_csv;
@@ -149,7 +150,7 @@ pub(super) async fn run(client: &FastrackClient, args: Args, json_mode: bool) ->
 pub(super) fn write_visits(
     path: &Path,
     config: &serde_json::Value,
-    runs: &[BenchRun],
+    runs: &[BenchRun<PlaneObstacle, 2>],
     json_mode: bool,
 ) -> anyhow::Result<()> {
     let names: Vec<String> =
@@ -168,7 +169,7 @@ pub(super) fn write_visits(
 }
 
 /// PF, on either raw path, must never collide nor exceed its bound.
-fn ensure_pf_safe(methods: &[Method], runs: &[BenchRun]) -> anyhow::Result<()> {
+fn ensure_pf_safe(methods: &[Method], runs: &[BenchRun<PlaneObstacle, 2>]) -> anyhow::Result<()> {
     let unsafe_runs: Vec<String> = runs
         .iter()
         .filter(|r| methods[r.method].is_parametric() && r.run.outcome.is_unsafe())
@@ -182,7 +183,7 @@ fn ensure_pf_safe(methods: &[Method], runs: &[BenchRun]) -> anyhow::Result<()> {
 /// merged parts').
 pub(super) fn report(
     config: &serde_json::Value,
-    runs: &[BenchRun],
+    runs: &[BenchRun<PlaneObstacle, 2>],
     wall_s: f64,
     command: &str,
     recording: &Recording,
@@ -192,7 +193,7 @@ pub(super) fn report(
         serde_json::from_value(config["methods"].clone()).context("the configuration's methods")?;
     let methods: Vec<Method> =
         names.iter().map(|m| Method::parse(m)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
-    let by_method = |m: usize| runs.iter().filter(|r| r.method == m).map(|r| &r.run).collect::<Vec<&Run>>();
+    let by_method = |m: usize| runs.iter().filter(|r| r.method == m).map(|r| &r.run).collect::<Vec<&PlaneRun>>();
     let summaries: Vec<Summary> =
         methods.iter().enumerate().map(|(m, method)| summarise(method.label(), &by_method(m))).collect();
     let pf = methods.iter().position(|m| *m == Method::Parametric);
@@ -217,7 +218,7 @@ pub(super) fn report(
     let paper = paper_comparison(&summaries);
     let shares = beta_share_table(&summaries);
     if let Some(name) = &recording.record {
-        let shown: Vec<&Run> = runs.iter().filter(|r| r.world == FIGURE_WORLD).map(|r| &r.run).collect();
+        let shown: Vec<&PlaneRun> = runs.iter().filter(|r| r.world == FIGURE_WORLD).map(|r| &r.run).collect();
         let steb = shown.first().map(|r| r.steb_radius).context("the runs hold no run of the figure's world")?;
         let generation: Generation = serde_json::from_value(config["world"].clone()).context("the world settings")?;
         let world = world_of(None, &generation, FIGURE_WORLD, steb)?;
@@ -226,7 +227,7 @@ pub(super) fn report(
         methods_on_one_world(&figure, &world, &shown).map_err(anyhow::Error::msg)?;
         let times_figure = recording.results_dir.join(format!("{name}-time-to-goal.png"));
         let labels: Vec<&str> = methods.iter().map(Method::label).collect();
-        let by_method_runs: Vec<Vec<&Run>> = (0..methods.len()).map(by_method).collect();
+        let by_method_runs: Vec<Vec<&PlaneRun>> = (0..methods.len()).map(by_method).collect();
         time_to_goal(&times_figure, &labels, &by_method_runs).map_err(anyhow::Error::msg)?;
         let path = write_record(
             &recording.results_dir,

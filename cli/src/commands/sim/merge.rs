@@ -2,6 +2,7 @@
 
 use super::bench::{report, write_visits};
 use super::Recording;
+use fastrack_online::geometry::PlaneObstacle;
 use fastrack_sim::bench::{BenchPart, PART_STEM};
 use std::path::PathBuf;
 
@@ -20,7 +21,7 @@ pub(super) struct Args {
 
 /// `fastrack sim merge`: the parts of a sharded benchmark, merged into the record a single run writes.
 pub(super) fn run(args: Args, json_mode: bool) -> anyhow::Result<()> {
-    let merged = BenchPart::merge(&args.part_dir, PART_STEM)?;
+    let merged = BenchPart::<PlaneObstacle, 2>::merge(&args.part_dir, PART_STEM)?;
     let mut runs = merged.items;
     runs.sort_by_key(|r| (r.world, r.method));
     if let Some(path) = &args.visits {

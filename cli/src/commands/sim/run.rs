@@ -4,7 +4,7 @@ use super::{print, world_of, Generation, Simulation};
 use anyhow::Context as _;
 use fastrack_cli::load_generator::LatencySummary;
 use fastrack_client::FastrackClient;
-use fastrack_sim::episode::{Outcome, Run};
+use fastrack_sim::episode::{Outcome, PlaneRun};
 use fastrack_sim::methods::Method;
 use fastrack_sim::plot::{over_time, trajectory};
 use serde_json::json;
@@ -31,7 +31,7 @@ pub(super) struct Args {
     generation: Generation,
 }
 
-fn run_line(run: &Run, beta_l: f64) -> String {
+fn run_line(run: &PlaneRun, beta_l: f64) -> String {
     let latency = LatencySummary::from_latencies(&mut run.decision_times.clone());
     let speed = run.mean_beta().map_or(String::new(), |mean| {
         format!(" mean beta {mean:.3} m/s, above beta_l {:.0}% of the time;", 100.0 * run.share_above(beta_l))
