@@ -75,8 +75,8 @@ enum Command {
     /// Load generator: closed-loop clients at each concurrency, unary TrackingControl batches or Track
     /// ticks; prints throughput and latency percentiles.
     Load(load::Args),
-    /// The navigation simulator: a robot driven by Parametric FaSTrack (or a baseline) through a 2-D world
-    /// over this server: run, bench, fleet, world.
+    /// The navigation simulator: a robot driven by Parametric FaSTrack (or a baseline) through a world, in
+    /// the plane or in space by the model's planner, over this server: run, bench, fleet, world.
     Sim(Box<sim::Args>),
     /// Admin: loads a model from the server's repository.
     LoadModel(model_admin::VersionArgs),

@@ -119,6 +119,18 @@ pub(crate) fn invalid<T>(field: impl Into<String>, problem: impl Into<String>) -
     Err(WorldError::Invalid { field: field.into(), problem: problem.into() })
 }
 
+impl<O, const D: usize> World<O, D> {
+    /// The workspace as `(min, max)`.
+    pub fn bounds(&self) -> (Point<D>, Point<D>) {
+        (self.min, self.max)
+    }
+
+    /// True if `p` lies in the workspace.
+    pub fn contains(&self, p: Point<D>) -> bool {
+        inside(p, self.bounds())
+    }
+}
+
 impl<O: WorldObstacle<D>, const D: usize> World<O, D> {
     /// Reads a world from a `.toml` or `.json` file (by extension) and checks its values.
     pub fn load(path: &Path) -> Result<Self, WorldError> {
@@ -137,16 +149,6 @@ impl<O: WorldObstacle<D>, const D: usize> World<O, D> {
     /// The world as TOML.
     pub fn to_toml(&self) -> String {
         toml::to_string_pretty(self).expect("a world serialises")
-    }
-
-    /// The workspace as `(min, max)`.
-    pub fn bounds(&self) -> (Point<D>, Point<D>) {
-        (self.min, self.max)
-    }
-
-    /// True if `p` lies in the workspace.
-    pub fn contains(&self, p: Point<D>) -> bool {
-        inside(p, self.bounds())
     }
 
     /// Checks every value: finite numbers, a workspace with area (volume), sides of at most

@@ -12,6 +12,7 @@ use fastrack_sim::bench::{
 };
 use fastrack_sim::episode::PlaneRun;
 use fastrack_sim::methods::Method;
+use fastrack_sim::plot::View;
 use fastrack_sim::plot::{methods_on_one_world, time_to_goal};
 use fastrack_sim::visits::write_csv;
 use fastrack_sim::world::PlaneWorld;
@@ -224,7 +225,7 @@ pub(super) fn report(
         let world = world_of(None, &generation, FIGURE_WORLD, steb)?;
         let figure = recording.results_dir.join(format!("{name}-world{FIGURE_WORLD}.png"));
         std::fs::create_dir_all(&recording.results_dir)?;
-        methods_on_one_world(&figure, &world, &shown).map_err(anyhow::Error::msg)?;
+        methods_on_one_world(&figure, &world, &shown, View::TOP).map_err(anyhow::Error::msg)?;
         let times_figure = recording.results_dir.join(format!("{name}-time-to-goal.png"));
         let labels: Vec<&str> = methods.iter().map(Method::label).collect();
         let by_method_runs: Vec<Vec<&PlaneRun>> = (0..methods.len()).map(by_method).collect();

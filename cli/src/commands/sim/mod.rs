@@ -11,10 +11,9 @@ mod world;
 use super::{print, Server};
 use anyhow::Context as _;
 use fastrack_client::{model_ref, FastrackClient};
-use fastrack_proto::planner_speed::SpeedRow;
 use fastrack_sim::episode::{RunSettings, Simulator};
 use fastrack_sim::tracker::Disturbance;
-use fastrack_sim::world::{PlaneWorld, WorldFamily, WorldSpec};
+use fastrack_sim::world::{World, WorldFamily, WorldObstacle, WorldSpec};
 use std::path::PathBuf;
 use std::sync::Arc;
 
@@ -87,10 +86,11 @@ impl Simulation {
 /// How generated worlds look.
 #[derive(clap::Args, serde::Deserialize)]
 struct Generation {
-    /// Workspace width and height (m).
-    #[arg(long, value_delimiter = ',', default_value = "30,20", num_args = 1)]
+    /// Workspace width and depth, and height for a model flying in space (m); default 30,20 (30,20,6).
+    #[arg(long, value_delimiter = ',', num_args = 1)]
+    #[serde(default)]
     size: Vec<f64>,
-    /// Obstacles per 100 m^2.
+    /// Obstacles per 100 m^2 of ground.
     #[arg(long, default_value_t = 2.0)]
     density: f64,
     /// Smallest and largest obstacle size (m): radius, half side (geometric mean), quarter of a wall's length.
@@ -127,15 +127,24 @@ impl Generation {
         }
     }
 
-    fn spec(&self, seed: u64, inflation: f64) -> anyhow::Result<WorldSpec<2>> {
-        let (&[w, h], &[lo, hi]) = (self.size.as_slice(), self.size_range.as_slice()) else {
-            anyhow::bail!("--size and --size-range take two numbers each, e.g. --size 30,20 --size-range 0.4,1.5");
+    fn spec<const D: usize>(&self, seed: u64, inflation: f64) -> anyhow::Result<WorldSpec<D>> {
+        let &[lo, hi] = self.size_range.as_slice() else {
+            anyhow::bail!("--size-range takes two numbers, e.g. --size-range 0.4,1.5");
+        };
+        let size = match self.size.as_slice() {
+            [] => WorldSpec::<D>::default().size,
+            given => given.try_into().map_err(|_| {
+                anyhow::anyhow!(
+                    "--size takes {D} numbers for this model, e.g. {}; got {given:?}",
+                    ["30,20", "30,20,6"][D - 2]
+                )
+            })?,
         };
         Ok(WorldSpec {
             seed,
             family: self.family,
             popup_beyond: self.popup_beyond,
-            size: [w, h],
+            size,
             density: self.density,
             size_range: (lo, hi),
             inflation,
@@ -165,19 +174,16 @@ pub async fn run_command(server: &Server, args: Args, json_mode: bool) -> anyhow
     }
 }
 
-/// The model's table as the planner-speed rules read it.
-async fn speeds(client: &FastrackClient, model: &str) -> anyhow::Result<Vec<SpeedRow>> {
-    let info = client.get_model(model_ref(model, 0)).await?;
-    let rows: Vec<SpeedRow> = info.teb_table.iter().map(SpeedRow::from).collect();
-    anyhow::ensure!(!rows.is_empty(), "model {model} has an empty TEB table");
-    Ok(rows)
-}
-
-/// The world of a run: the file, or the seed's generated world.
-fn world_of(file: Option<&PathBuf>, generation: &Generation, seed: u64, steb: f64) -> anyhow::Result<PlaneWorld> {
+/// The world of a run in `D` axes: the file, or the seed's generated world.
+fn world_of<O: WorldObstacle<D>, const D: usize>(
+    file: Option<&PathBuf>,
+    generation: &Generation,
+    seed: u64,
+    steb: f64,
+) -> anyhow::Result<World<O, D>> {
     let inflation = generation.inflation(steb)?;
     let world = match file {
-        Some(path) => PlaneWorld::load(path)?,
+        Some(path) => World::load(path)?,
         None => generation.spec(seed, inflation)?.generate()?,
     };
     world.check_feasible(inflation).context("the world is not feasible for the sTEB")?;

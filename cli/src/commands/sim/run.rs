@@ -1,12 +1,15 @@
-//! `fastrack sim run`: one world, one method, a summary and figures.
+//! `fastrack sim run`: one world, one method, a summary and figures; in the plane or in space, by the
+//! model's planner.
 
 use super::{print, world_of, Generation, Simulation};
 use anyhow::Context as _;
 use fastrack_cli::load_generator::LatencySummary;
 use fastrack_client::FastrackClient;
-use fastrack_sim::episode::{Outcome, PlaneRun};
+use fastrack_online::geometry::{PlaneObstacle, SpaceObstacle};
+use fastrack_sim::episode::{Outcome, Run, Simulator};
 use fastrack_sim::methods::Method;
-use fastrack_sim::plot::{over_time, trajectory};
+use fastrack_sim::plot::{over_time, trajectory, Outlined, View};
+use fastrack_sim::world::WorldObstacle;
 use serde_json::json;
 use std::path::PathBuf;
 
@@ -22,7 +25,8 @@ pub(super) struct Args {
     /// pf, pf-fast, pf-planner, f-low, f-high, mf, mf-quick or mppi.
     #[arg(long, default_value = "pf")]
     method: String,
-    /// Where the trajectory figure goes (a second figure, over time, goes beside it).
+    /// Where the trajectory figure goes (a second figure, over time, goes beside it; in space the view from
+    /// above goes here and the side view beside it).
     #[arg(long, default_value = "target/sim/run.png")]
     plot: PathBuf,
     #[command(flatten)]
@@ -31,7 +35,7 @@ pub(super) struct Args {
     generation: Generation,
 }
 
-fn run_line(run: &PlaneRun, beta_l: f64) -> String {
+fn run_line<O, const D: usize>(run: &Run<O, D>, beta_l: f64) -> String {
     let latency = LatencySummary::from_latencies(&mut run.decision_times.clone());
     let speed = run.mean_beta().map_or(String::new(), |mean| {
         format!(" mean beta {mean:.3} m/s, above beta_l {:.0}% of the time;", 100.0 * run.share_above(beta_l))
@@ -63,14 +67,35 @@ fn run_line(run: &PlaneRun, beta_l: f64) -> String {
 /// Runs `fastrack sim run`.
 pub(super) async fn run(client: &FastrackClient, args: Args, json_mode: bool) -> anyhow::Result<()> {
     let simulator = args.simulation.connect(client, false).await?;
+    match simulator.dim() {
+        2 => run_in::<PlaneObstacle, 2>(&simulator, args, json_mode, &[("png", View::TOP)]).await,
+        3 => {
+            run_in::<SpaceObstacle, 3>(&simulator, args, json_mode, &[("png", View::TOP), ("side.png", View::SIDE)])
+                .await
+        }
+        other => anyhow::bail!("the model's planner has {other} axes; the simulator flies in the plane or in space"),
+    }
+}
+
+/// One run in a world of `D` axes, its trajectory drawn in each of `views` (the figure's extension, the
+/// view).
+async fn run_in<O: WorldObstacle<D> + Outlined<D>, const D: usize>(
+    simulator: &std::sync::Arc<Simulator>,
+    args: Args,
+    json_mode: bool,
+    views: &[(&str, View)],
+) -> anyhow::Result<()> {
     let beta_l = simulator.speeds()[0].beta;
-    let world = world_of(args.world.as_ref(), &args.generation, args.seed, simulator.steb_radius())?;
+    let world = world_of::<O, D>(args.world.as_ref(), &args.generation, args.seed, simulator.steb_radius())?;
     let method = Method::parse(&args.method).map_err(anyhow::Error::msg)?;
     let run = simulator.spawn_run(world.clone(), method, args.seed).await.context("the run's thread failed")??;
     if let Some(dir) = args.plot.parent() {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
-    trajectory(&args.plot, &world, &run, beta_l, 2.0).map_err(anyhow::Error::msg)?;
+    for (extension, view) in views {
+        trajectory(&args.plot.with_extension(extension), &world, &run, beta_l, 2.0, *view)
+            .map_err(anyhow::Error::msg)?;
+    }
     let over = args.plot.with_extension("time.png");
     over_time(&over, &run).map_err(anyhow::Error::msg)?;
     print(

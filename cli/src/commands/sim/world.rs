@@ -1,8 +1,12 @@
-//! `fastrack sim world`: a world generated from a seed, or a world file checked.
+//! `fastrack sim world`: a world generated from a seed, or a world file checked; in the plane or in space,
+//! by the model's planner.
 
-use super::{print, speeds, world_of, Generation};
+use super::{print, world_of, Generation};
 use anyhow::Context as _;
-use fastrack_client::FastrackClient;
+use fastrack_client::{model_ref, FastrackClient};
+use fastrack_online::geometry::{PlaneObstacle, SpaceObstacle};
+use fastrack_proto::planner_speed::SpeedRow;
+use fastrack_sim::world::WorldObstacle;
 use serde_json::json;
 use std::path::PathBuf;
 
@@ -27,8 +31,21 @@ pub(super) struct Args {
 
 /// Runs `fastrack sim world`.
 pub(super) async fn run(client: &FastrackClient, args: Args, json_mode: bool) -> anyhow::Result<()> {
-    let steb = args.generation.inflation(speeds(client, &args.model).await?[0].bound)?;
-    let world = world_of(args.check.as_ref(), &args.generation, args.seed, steb)?;
+    let info = client.get_model(model_ref(&args.model, 0)).await?;
+    let steb = info.teb_table.first().map(|row| SpeedRow::from(row).bound).context("the model's TEB table is empty")?;
+    let steb = args.generation.inflation(steb)?;
+    match info.planner_dim {
+        2 => world_in::<PlaneObstacle, 2>(&args, steb, json_mode),
+        3 => world_in::<SpaceObstacle, 3>(&args, steb, json_mode),
+        other => {
+            anyhow::bail!("model {} has a planner of {other} axes; worlds lie in the plane or in space", args.model)
+        }
+    }
+}
+
+/// Generates or checks a world of `D` axes feasible for `steb`.
+fn world_in<O: WorldObstacle<D>, const D: usize>(args: &Args, steb: f64, json_mode: bool) -> anyhow::Result<()> {
+    let world = world_of::<O, D>(args.check.as_ref(), &args.generation, args.seed, steb)?;
     let text = world.to_toml();
     match (&args.check, &args.out) {
         (Some(path), _) => print(json_mode, json!({"world": path, "feasible_for_steb_m": steb}), || {
