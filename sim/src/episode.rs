@@ -194,7 +194,8 @@ impl<O, const D: usize> Run<O, D> {
     /// The share of the run's time with a planner speed bound above `beta` in use.
     pub fn share_above(&self, beta: f64) -> f64 {
         let seconds: f64 = self.beta_seconds.iter().map(|(_, s)| s).sum();
-        let above: f64 = self.beta_seconds.iter().filter(|(b, _)| *b > beta).map(|(_, s)| s).sum();
+        // Folded from +0: an empty sum of floats is -0, which prints as "-0%".
+        let above: f64 = self.beta_seconds.iter().filter(|(b, _)| *b > beta).fold(0.0, |sum, (_, s)| sum + s);
         if seconds > 0.0 {
             above / seconds
         } else {

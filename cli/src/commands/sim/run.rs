@@ -92,20 +92,26 @@ async fn run_in<O: WorldObstacle<D> + Outlined<D>, const D: usize>(
     if let Some(dir) = args.plot.parent() {
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
+    let mut figures = Vec::new();
     for (extension, view) in views {
-        trajectory(&args.plot.with_extension(extension), &world, &run, beta_l, 2.0, *view)
-            .map_err(anyhow::Error::msg)?;
+        let figure = args.plot.with_extension(extension);
+        trajectory(&figure, &world, &run, beta_l, 2.0, *view).map_err(anyhow::Error::msg)?;
+        figures.push(figure);
     }
     let over = args.plot.with_extension("time.png");
     over_time(&over, &run).map_err(anyhow::Error::msg)?;
+    figures.push(over);
     print(
         json_mode,
         json!({"method": run.method, "outcome": run.outcome.label(), "time_s": run.time, "min_clearance_m": run.min_clearance,
                "largest_error_minus_bound_m": run.worst_excess, "replans": run.replans, "resets": run.resets, "held_steps": run.held_steps,
                "server_calls": run.round_trips, "steps_out_of_domain": run.out_of_domain, "steps_past_the_certificate": run.uncertified_steps,
                "steps_the_bound_reached_an_obstacle": run.exposed_steps, "mean_beta": run.mean_beta(),
-               "share_above_beta_l": run.share_above(beta_l), "plot": args.plot, "plot_over_time": over}),
-        || format!("{}\nfigures: {} and {}", run_line(&run, beta_l), args.plot.display(), over.display()),
+               "share_above_beta_l": run.share_above(beta_l), "figures": figures}),
+        || {
+            let names: Vec<String> = figures.iter().map(|f| f.display().to_string()).collect();
+            format!("{}\nfigures: {}", run_line(&run, beta_l), names.join(", "))
+        },
     );
     anyhow::ensure!(!run.outcome.is_unsafe(), "the run was unsafe: {}", run.outcome.label());
     Ok(())

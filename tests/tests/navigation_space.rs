@@ -1,0 +1,92 @@
+//! The simulator in space over a real server, on a quad10d test bundle (an untrained network: these tests are
+//! of the simulator's plumbing in three axes, not of a model's safety): `sim world` generates a world in space
+//! that loads and is feasible, the loop plans around its solids with the planner moving at most `beta dt` per
+//! axis, quad10d's own dynamics fly the tracker from the start, `sim run` draws the run from above and from the
+//! side, and a world of the other dimension is refused.
+
+use fastrack_client::model_ref;
+use fastrack_e2e::{binary, run_binary, write_test_bundle, TestServer};
+use fastrack_online::geometry::{clearance, norm, sub, SpaceObstacle};
+use fastrack_sim::episode::{RunSettings, Simulator};
+use fastrack_sim::methods::{Method, MethodError};
+use fastrack_sim::world::{PlaneWorld, World, WorldSpec};
+use fastrack_valuefn::system::{dubins4d, quad10d};
+use std::process::Command;
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn worlds_in_space_are_generated_flown_and_drawn_and_the_other_dimension_is_refused() {
+    let repo = tempfile::tempdir().unwrap();
+    write_test_bundle(repo.path(), &quad10d::system(), "quad10d", 1, 2);
+    write_test_bundle(repo.path(), &dubins4d::system(), "car", 1, 1);
+    let (server, client) = TestServer::start_serving(repo.path()).await;
+    let settings = RunSettings {
+        model: model_ref("quad10d", 0),
+        control_period: Some(0.05),
+        time_limit: 2.0,
+        ..RunSettings::default()
+    };
+    let simulator = std::sync::Arc::new(Simulator::connect(&client, settings).await.unwrap());
+    assert_eq!(simulator.dim(), 3);
+    let steb = simulator.steb_radius();
+
+    // `sim world` in space: a file of three-axis points between a floor and a ceiling, feasible for the sTEB.
+    let dir = tempfile::tempdir().unwrap();
+    let file = dir.path().join("world.toml");
+    let file_arg = file.to_str().unwrap();
+    let common = ["--server", server.endpoint.as_str(), "sim"];
+    run_binary("fastrack", &[&common[..], &["world", "--model", "quad10d", "--seed", "2", "--out", file_arg]].concat());
+    let world = World::<SpaceObstacle, 3>::load(&file).unwrap();
+    world.check_feasible(steb).unwrap();
+    assert_eq!(world.obstacles[..2], [SpaceObstacle::Floor { height: 0.0 }, SpaceObstacle::Ceiling { height: 6.0 }]);
+    let generated: World<SpaceObstacle, 3> =
+        WorldSpec { seed: 2, inflation: steb, ..WorldSpec::default() }.generate().unwrap();
+    assert_eq!(world, generated, "the CLI's world is the library's for the same seed");
+
+    // FaSTrack at beta_l: the planner follows its plan at most beta_l dt per axis, keeping the sTEB from
+    // every obstacle; the tracker starts at the start under quad10d's dynamics.
+    let run = simulator.spawn_run(world.clone(), Method::FastrackSlowest, 2).await.unwrap().unwrap();
+    assert!(!run.samples.is_empty(), "{:?}", run.outcome);
+    let beta_l = simulator.speeds()[0].beta;
+    let mut planner = world.start;
+    for sample in &run.samples {
+        let next = sample.planner.expect("FaSTrack has a planner");
+        let moved = sub(next, planner);
+        assert!(moved.iter().all(|m| m.abs() <= beta_l * 0.05 + 1e-9), "the planner moved {moved:?} in one period");
+        assert!(clearance(&world.obstacles, next) > steb, "the planner at {next:?} is within the sTEB");
+        planner = next;
+    }
+    // 0.5 m/s along x, falling at most g dt^2 / 2 in the first period.
+    let first = run.samples[0].position;
+    assert!(norm(sub(first, world.start)) < 0.5 * 0.05 + 9.81 * 0.05 * 0.05, "first position {first:?}");
+
+    // A world in the plane for a model flying in space is refused.
+    let planar: PlaneWorld = WorldSpec { seed: 2, inflation: steb, ..WorldSpec::default() }.generate().unwrap();
+    let refused = simulator.run(&planar, &Method::Parametric, 1).await;
+    assert!(
+        matches!(&refused, Err(MethodError::Setup(why)) if why.contains("a world of 2 axes for a model whose planner has 3")),
+        "{:?}",
+        refused.err()
+    );
+
+    // `sim run` in space draws the run from above and from the side (and exits non-zero if the untrained
+    // network let the tracker leave its bound: the figures are written first).
+    let plot = dir.path().join("run.png");
+    let output = Command::new(binary("fastrack"))
+        .args(common)
+        .args(["run", "--model", "quad10d", "--world", file_arg, "--method", "f-low", "--control-period", "0.05"])
+        .args(["--time-limit", "2", "--plot", plot.to_str().unwrap()])
+        .output()
+        .unwrap();
+    let said = String::from_utf8_lossy(&output.stdout);
+    assert!(said.starts_with("F(beta_l): "), "{said}{}", String::from_utf8_lossy(&output.stderr));
+    for figure in ["run.png", "run.side.png", "run.time.png"] {
+        let bytes = std::fs::read(dir.path().join(figure)).unwrap_or_else(|e| panic!("{figure}: {e}"));
+        assert!(bytes.starts_with(b"\x89PNG"), "{figure} is no PNG");
+    }
+    let car = Command::new(binary("fastrack"))
+        .args(common)
+        .args(["run", "--model", "car", "--world", file_arg, "--control-period", "0.05"])
+        .output()
+        .unwrap();
+    assert!(!car.status.success(), "a world in space was driven by a planar model");
+}
