@@ -46,6 +46,16 @@ impl View {
     /// A world in space from the side: x across, z up.
     pub const SIDE: View = View { axes: [0, 2] };
 
+    /// The views a world of `D` axes is drawn in, each with the extension of its figure's file: the plane
+    /// as it is (`png`); space from above (`png`) and from the side (`side.png`).
+    pub fn all<const D: usize>() -> &'static [(&'static str, View)] {
+        if D == 2 {
+            &[("png", View::TOP)]
+        } else {
+            &[("png", View::TOP), ("side.png", View::SIDE)]
+        }
+    }
+
     /// The point's coordinates in the view.
     fn of<const D: usize>(self, p: &Point<D>) -> (f64, f64) {
         (p[self.axes[0]], p[self.axes[1]])

@@ -2,7 +2,8 @@
 //! of the simulator's plumbing in three axes, not of a model's safety): `sim world` generates a world in space
 //! that loads and is feasible, the loop plans around its solids with the planner moving at most `beta dt` per
 //! axis, quad10d's own dynamics fly the tracker from the start, `sim run` draws the run from above and from the
-//! side, and a world of the other dimension is refused.
+//! side, `sim bench` in shards merges into a record of worlds in space, and a world of the other dimension is
+//! refused.
 
 use fastrack_client::model_ref;
 use fastrack_e2e::{binary, run_binary, write_test_bundle, TestServer};
@@ -83,6 +84,28 @@ async fn worlds_in_space_are_generated_flown_and_drawn_and_the_other_dimension_i
         let bytes = std::fs::read(dir.path().join(figure)).unwrap_or_else(|e| panic!("{figure}: {e}"));
         assert!(bytes.starts_with(b"\x89PNG"), "{figure} is no PNG");
     }
+
+    // `sim bench` in space, split in two shards and merged: the record says the worlds have three axes and
+    // draws world 1 from above and from the side; the paper's Table 1 (of its car) is not set beside it.
+    let parts = dir.path().join("parts");
+    let results = dir.path().join("results");
+    for shard in ["0/2", "1/2"] {
+        let bench = ["bench", "--model", "quad10d", "--worlds", "2", "--methods", "f-low,f-high"];
+        let settings = ["--control-period", "0.05", "--time-limit", "1", "--shard", shard, "--part-dir"];
+        run_binary("fastrack", &[&common[..], &bench, &settings, &[parts.to_str().unwrap()]].concat());
+    }
+    let merge = ["merge", "--part-dir", parts.to_str().unwrap(), "--record", "space", "--results-dir"];
+    let merged = run_binary("fastrack", &[&common[..], &merge, &[results.to_str().unwrap()]].concat());
+    assert!(merged.contains("F(beta_l)") && !merged.contains("paper"), "{merged}");
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(results.join("space.json")).unwrap()).unwrap();
+    assert_eq!(record["config"]["dim"], 3, "{record}");
+    for figure in ["space-world1.png", "space-world1.side.png"] {
+        assert!(results.join(figure).is_file(), "{figure} missing");
+    }
+    // No untrained run reaches its goal within a second: no time to goal to draw.
+    assert!(record["figures"]["time_to_goal_figure"].is_null() && !results.join("space-time-to-goal.png").exists());
+
     let car = Command::new(binary("fastrack"))
         .args(common)
         .args(["run", "--model", "car", "--world", file_arg, "--control-period", "0.05"])

@@ -5,18 +5,19 @@ use anyhow::Context as _;
 use fastrack_client::FastrackClient;
 use fastrack_lab::record::write_record;
 use fastrack_lab::shard::Shard;
-use fastrack_online::geometry::PlaneObstacle;
+use fastrack_online::geometry::Point;
 use fastrack_sim::bench::{
     beta_share_table, paper_comparison, summarise, summary_json, table, time_ratio, BenchPart, BenchRun, Summary,
     FIGURE_WORLD, PART_STEM,
 };
-use fastrack_sim::episode::PlaneRun;
+use fastrack_sim::episode::{Outcome, Run, Simulator};
 use fastrack_sim::methods::Method;
-use fastrack_sim::plot::View;
-use fastrack_sim::plot::{methods_on_one_world, time_to_goal};
+use fastrack_sim::plot::{methods_on_one_world, time_to_goal, Outlined, View};
 use fastrack_sim::visits::write_csv;
-use fastrack_sim::world::PlaneWorld;
+use fastrack_sim::world::{World, WorldObstacle};
 use indicatif::{ProgressBar, ProgressStyle};
+use serde::de::DeserializeOwned;
+use serde::Serialize;
 use serde_json::json;
 use std::path::{Path, PathBuf};
 use std::sync::Arc;
@@ -71,15 +72,28 @@ pub(super) async fn run(client: &FastrackClient, args: Args, json_mode: bool) ->
         "--shard {shard} writes a part: give --part-dir (merge the parts with `fastrack sim merge`)"
     );
     let simulator = args.simulation.connect(client, args.traces.is_some()).await?;
+    in_dimension!(async simulator.dim(), bench_in(simulator, args, shard, json_mode))
+}
+
+/// The benchmark through worlds of `D` axes.
+async fn bench_in<O: WorldObstacle<D> + Outlined<D>, const D: usize>(
+    simulator: Arc<Simulator>,
+    args: Args,
+    shard: Shard,
+    json_mode: bool,
+) -> anyhow::Result<()>
+where
+    Point<D>: Serialize + DeserializeOwned,
+{
     if let Some(dir) = &args.traces {
         std::fs::create_dir_all(dir).with_context(|| format!("creating the traces folder {}", dir.display()))?;
     }
     let methods: Vec<Method> =
         args.methods.iter().map(|m| Method::parse(m)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
     let seeds: Vec<u64> = (1..=args.worlds).filter(|&seed| shard.takes(seed as usize - 1)).collect();
-    let worlds: Vec<(u64, PlaneWorld)> = seeds
+    let worlds: Vec<(u64, World<O, D>)> = seeds
         .iter()
-        .map(|&seed| Ok((seed, world_of(None, &args.generation, seed, simulator.steb_radius())?)))
+        .map(|&seed| Ok((seed, world_of::<O, D>(None, &args.generation, seed, simulator.steb_radius())?)))
         .collect::<anyhow::Result<_>>()?;
     let bar = ProgressBar::new((worlds.len() * methods.len()) as u64).with_style(
         ProgressStyle::with_template("{elapsed_precise} [{bar:30}] {pos}/{len} runs {msg}")?.progress_chars("=> "),
@@ -113,7 +127,7 @@ pub(super) async fn run(client: &FastrackClient, args: Args, json_mode: bool) ->
         runs.push(task.await.context("a run's task failed")??);
     }
     bar.finish_and_clear();
-    let config = json!({"model": args.simulation.model, "worlds": args.worlds, "methods": args.methods,
+    let config = json!({"model": args.simulation.model, "dim": D, "worlds": args.worlds, "methods": args.methods,
         "control_period_s": simulator.control_period(), "substeps": args.simulation.substeps,
         "sensor_range_m": simulator.sensor_range(), "time_limit_s": args.simulation.time_limit,
         "disturbance_m_s": args.simulation.disturbance, "state": simulator.state_names(),
@@ -148,10 +162,10 @@ pub(super) async fn run(client: &FastrackClient, args: Args, json_mode: bool) ->
 
 /// Writes the visits of `runs` (world by world) into `path` as CSV, the state columns named by the
 /// benchmark's configuration.
-pub(super) fn write_visits(
+pub(super) fn write_visits<O, const D: usize>(
     path: &Path,
     config: &serde_json::Value,
-    runs: &[BenchRun<PlaneObstacle, 2>],
+    runs: &[BenchRun<O, D>],
     json_mode: bool,
 ) -> anyhow::Result<()> {
     let names: Vec<String> =
@@ -170,7 +184,7 @@ pub(super) fn write_visits(
 }
 
 /// PF, on either raw path, must never collide nor exceed its bound.
-fn ensure_pf_safe(methods: &[Method], runs: &[BenchRun<PlaneObstacle, 2>]) -> anyhow::Result<()> {
+fn ensure_pf_safe<O, const D: usize>(methods: &[Method], runs: &[BenchRun<O, D>]) -> anyhow::Result<()> {
     let unsafe_runs: Vec<String> = runs
         .iter()
         .filter(|r| methods[r.method].is_parametric() && r.run.outcome.is_unsafe())
@@ -182,9 +196,9 @@ fn ensure_pf_safe(methods: &[Method], runs: &[BenchRun<PlaneObstacle, 2>]) -> an
 
 /// The benchmark's tables, ratios, record and figures, from its configuration and runs (a single run's or
 /// merged parts').
-pub(super) fn report(
+pub(super) fn report<O: WorldObstacle<D> + Outlined<D>, const D: usize>(
     config: &serde_json::Value,
-    runs: &[BenchRun<PlaneObstacle, 2>],
+    runs: &[BenchRun<O, D>],
     wall_s: f64,
     command: &str,
     recording: &Recording,
@@ -194,7 +208,7 @@ pub(super) fn report(
         serde_json::from_value(config["methods"].clone()).context("the configuration's methods")?;
     let methods: Vec<Method> =
         names.iter().map(|m| Method::parse(m)).collect::<Result<_, _>>().map_err(anyhow::Error::msg)?;
-    let by_method = |m: usize| runs.iter().filter(|r| r.method == m).map(|r| &r.run).collect::<Vec<&PlaneRun>>();
+    let by_method = |m: usize| runs.iter().filter(|r| r.method == m).map(|r| &r.run).collect::<Vec<&Run<O, D>>>();
     let summaries: Vec<Summary> =
         methods.iter().enumerate().map(|(m, method)| summarise(method.label(), &by_method(m))).collect();
     let pf = methods.iter().position(|m| *m == Method::Parametric);
@@ -216,20 +230,33 @@ pub(super) fn report(
         .collect::<Vec<_>>()
         .join("\n");
     let ours = table(&summaries);
-    let paper = paper_comparison(&summaries);
+    // The paper's Table 1 is of its car, in the plane.
+    let paper = (D == 2).then(|| paper_comparison(&summaries));
     let shares = beta_share_table(&summaries);
+    let mut sections = vec![("Ours", &ours)];
+    sections.extend(paper.as_ref().map(|paper| ("The paper's Table 1 beside ours", paper)));
+    sections.push(("Share of the time at each beta (%)", &shares));
     if let Some(name) = &recording.record {
-        let shown: Vec<&PlaneRun> = runs.iter().filter(|r| r.world == FIGURE_WORLD).map(|r| &r.run).collect();
+        let shown: Vec<&Run<O, D>> = runs.iter().filter(|r| r.world == FIGURE_WORLD).map(|r| &r.run).collect();
         let steb = shown.first().map(|r| r.steb_radius).context("the runs hold no run of the figure's world")?;
         let generation: Generation = serde_json::from_value(config["world"].clone()).context("the world settings")?;
-        let world = world_of(None, &generation, FIGURE_WORLD, steb)?;
+        let world = world_of::<O, D>(None, &generation, FIGURE_WORLD, steb)?;
         let figure = recording.results_dir.join(format!("{name}-world{FIGURE_WORLD}.png"));
         std::fs::create_dir_all(&recording.results_dir)?;
-        methods_on_one_world(&figure, &world, &shown, View::TOP).map_err(anyhow::Error::msg)?;
-        let times_figure = recording.results_dir.join(format!("{name}-time-to-goal.png"));
-        let labels: Vec<&str> = methods.iter().map(Method::label).collect();
-        let by_method_runs: Vec<Vec<&PlaneRun>> = (0..methods.len()).map(by_method).collect();
-        time_to_goal(&times_figure, &labels, &by_method_runs).map_err(anyhow::Error::msg)?;
+        for (extension, view) in View::all::<D>() {
+            let drawn = figure.with_extension(extension);
+            methods_on_one_world(&drawn, &world, &shown, *view).map_err(anyhow::Error::msg)?;
+        }
+        // Drawn when some run reached its goal: there is no time to goal to draw otherwise.
+        let times_figure = runs
+            .iter()
+            .any(|r| r.run.outcome == Outcome::Reached)
+            .then(|| recording.results_dir.join(format!("{name}-time-to-goal.png")));
+        if let Some(times_figure) = &times_figure {
+            let labels: Vec<&str> = methods.iter().map(Method::label).collect();
+            let by_method_runs: Vec<Vec<&Run<O, D>>> = (0..methods.len()).map(by_method).collect();
+            time_to_goal(times_figure, &labels, &by_method_runs).map_err(anyhow::Error::msg)?;
+        }
         let path = write_record(
             &recording.results_dir,
             name,
@@ -237,18 +264,15 @@ pub(super) fn report(
             config.clone(),
             json!({"summaries": summaries.iter().map(summary_json).collect::<Vec<_>>(),
                    "pf_time_ratios": ratios.iter().map(|(l, r)| json!({"against": l, "ratio": r.map(|x| x.0), "worlds": r.map(|x| x.1)})).collect::<Vec<_>>(),
-                   "paper_pf_over_f_ratio": 22.47 / 37.31, "wall_s": wall_s, "figure": figure,
+                   "paper_pf_over_f_ratio": (D == 2).then_some(22.47 / 37.31), "wall_s": wall_s, "figure": figure,
                    "time_to_goal_figure": times_figure}),
-            &[
-                ("Ours", &ours),
-                ("The paper's Table 1 beside ours", &paper),
-                ("Share of the time at each beta (%)", &shares),
-            ],
+            &sections,
         )?;
         eprintln!("record: {}", path.display());
     }
     print(json_mode, json!({"summaries": summaries.iter().map(summary_json).collect::<Vec<_>>()}), || {
-        format!("{}\n{}\n{}\n{ratio_text}", ours.to_markdown(), paper.to_markdown(), shares.to_markdown())
+        let tables: Vec<String> = sections.iter().map(|(_, table)| table.to_markdown()).collect();
+        format!("{}\n{ratio_text}", tables.join("\n"))
     });
     ensure_pf_safe(&methods, runs)
 }

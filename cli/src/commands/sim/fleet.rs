@@ -5,9 +5,11 @@ use anyhow::Context as _;
 use fastrack_cli::load_generator::LatencySummary;
 use fastrack_client::FastrackClient;
 use fastrack_lab::record::write_record;
+use fastrack_sim::episode::Simulator;
 use fastrack_sim::methods::Method;
-use fastrack_sim::world::PlaneWorld;
+use fastrack_sim::world::{World, WorldObstacle};
 use serde_json::json;
+use std::sync::Arc;
 use std::time::{Duration, Instant};
 
 /// Arguments of `fastrack sim fleet`.
@@ -27,12 +29,21 @@ pub(super) struct Args {
 /// Runs `fastrack sim fleet`.
 pub(super) async fn run(client: &FastrackClient, args: Args, json_mode: bool) -> anyhow::Result<()> {
     let simulator = args.simulation.connect(client, false).await?;
+    in_dimension!(async simulator.dim(), fleet_in(simulator, args, json_mode))
+}
+
+/// The fleet through worlds of `D` axes.
+async fn fleet_in<O: WorldObstacle<D>, const D: usize>(
+    simulator: Arc<Simulator>,
+    args: Args,
+    json_mode: bool,
+) -> anyhow::Result<()> {
     let mut lines = Vec::new();
     let mut figures = Vec::new();
     for &robots in &args.robots {
         anyhow::ensure!(robots > 0, "--robots takes counts of at least 1");
-        let worlds: Vec<PlaneWorld> = (1..=robots as u64)
-            .map(|seed| world_of(None, &args.generation, seed, simulator.steb_radius()))
+        let worlds: Vec<World<O, D>> = (1..=robots as u64)
+            .map(|seed| world_of::<O, D>(None, &args.generation, seed, simulator.steb_radius()))
             .collect::<anyhow::Result<_>>()?;
         let started = Instant::now();
         let tasks: Vec<_> = worlds

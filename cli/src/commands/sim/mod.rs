@@ -2,6 +2,28 @@
 //! figures), `bench` (seeded worlds x methods, the paper's Table 1, a record), `fleet` (many robots on one
 //! server at once) and `world` (generate or check a world file).
 
+/// `$f::<O, D>(...)` (awaited after `async`) for the obstacle kind `O` of a world of `$dim` axes: the plane
+/// (2) or space (3).
+macro_rules! in_dimension {
+    (async $dim:expr, $f:ident($($arg:expr),* $(,)?)) => {
+        match $dim {
+            2 => $f::<fastrack_online::geometry::PlaneObstacle, 2>($($arg),*).await,
+            3 => $f::<fastrack_online::geometry::SpaceObstacle, 3>($($arg),*).await,
+            other => Err(in_dimension!(@refused other)),
+        }
+    };
+    ($dim:expr, $f:ident($($arg:expr),* $(,)?)) => {
+        match $dim {
+            2 => $f::<fastrack_online::geometry::PlaneObstacle, 2>($($arg),*),
+            3 => $f::<fastrack_online::geometry::SpaceObstacle, 3>($($arg),*),
+            other => Err(in_dimension!(@refused other)),
+        }
+    };
+    (@refused $other:expr) => {
+        anyhow::anyhow!("a planner of {} axes: the simulator flies in the plane (2) or in space (3)", $other)
+    };
+}
+
 mod bench;
 mod fleet;
 mod merge;

@@ -5,7 +5,6 @@ use super::{print, world_of, Generation, Simulation};
 use anyhow::Context as _;
 use fastrack_cli::load_generator::LatencySummary;
 use fastrack_client::FastrackClient;
-use fastrack_online::geometry::{PlaneObstacle, SpaceObstacle};
 use fastrack_sim::episode::{Outcome, Run, Simulator};
 use fastrack_sim::methods::Method;
 use fastrack_sim::plot::{over_time, trajectory, Outlined, View};
@@ -67,23 +66,14 @@ fn run_line<O, const D: usize>(run: &Run<O, D>, beta_l: f64) -> String {
 /// Runs `fastrack sim run`.
 pub(super) async fn run(client: &FastrackClient, args: Args, json_mode: bool) -> anyhow::Result<()> {
     let simulator = args.simulation.connect(client, false).await?;
-    match simulator.dim() {
-        2 => run_in::<PlaneObstacle, 2>(&simulator, args, json_mode, &[("png", View::TOP)]).await,
-        3 => {
-            run_in::<SpaceObstacle, 3>(&simulator, args, json_mode, &[("png", View::TOP), ("side.png", View::SIDE)])
-                .await
-        }
-        other => anyhow::bail!("the model's planner has {other} axes; the simulator flies in the plane or in space"),
-    }
+    in_dimension!(async simulator.dim(), run_in(&simulator, args, json_mode))
 }
 
-/// One run in a world of `D` axes, its trajectory drawn in each of `views` (the figure's extension, the
-/// view).
+/// One run in a world of `D` axes, its trajectory drawn in each of the dimension's views.
 async fn run_in<O: WorldObstacle<D> + Outlined<D>, const D: usize>(
     simulator: &std::sync::Arc<Simulator>,
     args: Args,
     json_mode: bool,
-    views: &[(&str, View)],
 ) -> anyhow::Result<()> {
     let beta_l = simulator.speeds()[0].beta;
     let world = world_of::<O, D>(args.world.as_ref(), &args.generation, args.seed, simulator.steb_radius())?;
@@ -93,7 +83,7 @@ async fn run_in<O: WorldObstacle<D> + Outlined<D>, const D: usize>(
         std::fs::create_dir_all(dir).with_context(|| format!("creating {}", dir.display()))?;
     }
     let mut figures = Vec::new();
-    for (extension, view) in views {
+    for (extension, view) in View::all::<D>() {
         let figure = args.plot.with_extension(extension);
         trajectory(&figure, &world, &run, beta_l, 2.0, *view).map_err(anyhow::Error::msg)?;
         figures.push(figure);

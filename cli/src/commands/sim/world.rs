@@ -4,7 +4,6 @@
 use super::{print, world_of, Generation};
 use anyhow::Context as _;
 use fastrack_client::{model_ref, FastrackClient};
-use fastrack_online::geometry::{PlaneObstacle, SpaceObstacle};
 use fastrack_proto::planner_speed::SpeedRow;
 use fastrack_sim::world::WorldObstacle;
 use serde_json::json;
@@ -34,13 +33,7 @@ pub(super) async fn run(client: &FastrackClient, args: Args, json_mode: bool) ->
     let info = client.get_model(model_ref(&args.model, 0)).await?;
     let steb = info.teb_table.first().map(|row| SpeedRow::from(row).bound).context("the model's TEB table is empty")?;
     let steb = args.generation.inflation(steb)?;
-    match info.planner_dim {
-        2 => world_in::<PlaneObstacle, 2>(&args, steb, json_mode),
-        3 => world_in::<SpaceObstacle, 3>(&args, steb, json_mode),
-        other => {
-            anyhow::bail!("model {} has a planner of {other} axes; worlds lie in the plane or in space", args.model)
-        }
-    }
+    in_dimension!(info.planner_dim, world_in(&args, steb, json_mode))
 }
 
 /// Generates or checks a world of `D` axes feasible for `steb`.
