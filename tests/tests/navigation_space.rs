@@ -8,9 +8,9 @@
 use fastrack_client::model_ref;
 use fastrack_e2e::{binary, run_binary, write_test_bundle, TestServer};
 use fastrack_online::geometry::{clearance, norm, sub, SpaceObstacle};
-use fastrack_sim::episode::{RunSettings, Simulator};
-use fastrack_sim::methods::{Method, MethodError};
-use fastrack_sim::world::{PlaneWorld, World, WorldSpec};
+use fastrack_sim::episode::{Outcome, RunSettings, Simulator};
+use fastrack_sim::methods::{Method, MethodError, MppiSettings};
+use fastrack_sim::world::{PlaneWorld, World, WorldFamily, WorldSpec};
 use fastrack_valuefn::system::{dubins4d, quad10d};
 use std::process::Command;
 
@@ -112,4 +112,32 @@ async fn worlds_in_space_are_generated_flown_and_drawn_and_the_other_dimension_i
         .output()
         .unwrap();
     assert!(!car.status.success(), "a world in space was driven by a planar model");
+}
+
+/// MPPI needs no value function: on quad10d's own dynamics it flies open worlds in space to their goals,
+/// climbing or sinking on the way, never touching a solid, the floor or the ceiling.
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn mppi_flies_quad10d_through_open_worlds_in_space() {
+    let repo = tempfile::tempdir().unwrap();
+    write_test_bundle(repo.path(), &quad10d::system(), "quad10d", 1, 2);
+    let (_server, client) = TestServer::start_serving(repo.path()).await;
+    let settings = RunSettings {
+        model: model_ref("quad10d", 0),
+        control_period: Some(0.05),
+        time_limit: 30.0,
+        ..RunSettings::default()
+    };
+    let simulator = std::sync::Arc::new(Simulator::connect(&client, settings).await.unwrap());
+    for seed in 1..=2 {
+        let spec =
+            WorldSpec { seed, family: WorldFamily::Open, inflation: simulator.steb_radius(), ..WorldSpec::default() };
+        let world: World<SpaceObstacle, 3> = spec.generate().unwrap();
+        let mppi = Method::Mppi(MppiSettings::default());
+        let run = simulator.spawn_run(world.clone(), mppi, seed).await.unwrap().unwrap();
+        assert_eq!(run.outcome, Outcome::Reached, "world {seed}: {:?} after {:.1} s", run.outcome, run.time);
+        assert!(run.min_clearance > 0.0, "world {seed}");
+        let heights = run.samples.iter().map(|s| s.position[2]);
+        let (low, high) = heights.fold((f64::INFINITY, f64::NEG_INFINITY), |(l, h), z| (l.min(z), h.max(z)));
+        assert!(low > 0.0 && high < 6.0 && high - low > 0.05, "world {seed}: heights {low:.2}..{high:.2}");
+    }
 }

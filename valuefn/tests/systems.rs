@@ -378,3 +378,24 @@ fn quad10d_s_horizontal_axis_is_the_paper_s_under_the_tilt_rate_shear() {
     let largest = TILT_MAX * integral;
     assert!((largest - 0.69).abs() < 0.005 && largest < TILT_RATE_HALF_WIDTH, "largest tilt rate {largest}");
 }
+
+#[test]
+fn the_resting_control_holds_a_quadcopter_and_leaves_a_car_coasting() {
+    // Level, moving at 0.5 m/s along x: the thrust that cancels gravity, no tilt command.
+    let quad = quad10d::system();
+    let mut s = vec![0.0; 10];
+    s[1] = 0.5;
+    let u = quad.resting_control(&s);
+    assert!(u[0].abs() < 1e-12 && u[1].abs() < 1e-12, "{u:?}");
+    assert!((quad10d::K_T * u[2] - quad10d::GRAVITY).abs() < 1e-9, "hover thrust {}", u[2]);
+    let mut rate = vec![0.0; 10];
+    quad.dynamics(&s, &u, &[0.0; 3], &[], &mut rate);
+    assert!(rate[9].abs() < 1e-9, "the vertical speed changes at {}", rate[9]);
+    // Tilted: the filter's drift is cancelled as far as the tilt command's box allows.
+    s[2] = 0.3;
+    let tilted = quad.resting_control(&s);
+    assert!(tilted[0] > 0.0 && tilted[0] <= std::f64::consts::PI / 9.0, "{tilted:?}");
+    // A car's drift moves only its position: nothing to cancel.
+    let car = dubins4d::system();
+    assert_eq!(car.resting_control(&[1.0, 2.0, 0.7, 1.5]), vec![0.0, 0.0]);
+}

@@ -6,7 +6,10 @@
 //! Defaults, and why: 256 samples over a 3 s horizon of 0.1 s steps (pytorch_mppi's 100 samples are too few
 //! for obstacle fields; Nav2's 1000 samples of 56 x 0.05 s cost 4-8x more for little gain at these speeds),
 //! re-planned every 0.1 s and held in between (10 Hz, as Nav2 runs it); temperature 0.3 (Nav2's); noise
-//! 2 rad/s on the turn rate and 0.5 m/s^2 on the acceleration (40% and 50% of their ranges).
+//! on dubins4d 2 rad/s on the turn rate and 0.5 m/s^2 on the acceleration (40% and 50% of their half
+//! ranges), on other systems 40% of each control's half range (quad10d: 0.14 rad of tilt command, 2.9 m/s^2
+//! of thrust). The first nominal sequence holds the tracker's resting control (a quadcopter's hover thrust,
+//! a car's zero).
 
 use super::{Context, Decision, MethodError};
 use crate::world::WorldObstacle;
@@ -25,7 +28,7 @@ pub struct MppiSettings {
     pub step: f64,
     /// Temperature `lambda` of the weights.
     pub temperature: f64,
-    /// Standard deviation of the sampling noise, per control.
+    /// Standard deviation of the sampling noise, per control (empty: the system's default, above).
     pub noise: Vec<f64>,
     /// Cost per metre from the goal, per step.
     pub goal_weight: f64,
@@ -44,7 +47,7 @@ impl Default for MppiSettings {
             horizon: 30,
             step: 0.1,
             temperature: 0.3,
-            noise: vec![2.0, 0.5],
+            noise: Vec::new(),
             goal_weight: 1.0,
             obstacle_weight: 20.0,
             obstacle_scale: 0.3,
@@ -57,7 +60,7 @@ impl Default for MppiSettings {
 pub struct Mppi<O, const D: usize> {
     context: Context<O, D>,
     settings: MppiSettings,
-    /// The nominal control sequence, `horizon x n_control`.
+    /// The nominal control sequence, `horizon x n_control` (empty until the first plan).
     nominal: Vec<Vec<f64>>,
     /// Control periods left before the next plan.
     until_plan: usize,
@@ -67,8 +70,15 @@ pub struct Mppi<O, const D: usize> {
 
 impl<O: WorldObstacle<D>, const D: usize> Mppi<O, D> {
     /// MPPI with `settings`, checked.
-    pub fn new(context: Context<O, D>, settings: MppiSettings) -> Result<Self, MethodError> {
-        let n_control = context.tracker.system().n_control();
+    pub fn new(context: Context<O, D>, mut settings: MppiSettings) -> Result<Self, MethodError> {
+        let system = context.tracker.system();
+        let n_control = system.n_control();
+        if settings.noise.is_empty() {
+            settings.noise = match system.id {
+                fastrack_valuefn::system::dubins4d::ID => vec![2.0, 0.5],
+                _ => system.controls.iter().map(|c| 0.4 * (c.max - c.min) / 2.0).collect(),
+            };
+        }
         let positive = |x: f64| x.is_finite() && x > 0.0;
         if settings.samples == 0
             || settings.horizon == 0
@@ -82,7 +92,7 @@ impl<O: WorldObstacle<D>, const D: usize> Mppi<O, D> {
             )));
         }
         Ok(Self {
-            nominal: vec![vec![0.0; n_control]; settings.horizon],
+            nominal: Vec::new(),
             until_plan: 0,
             obstacles: Vec::new(),
             rng: StdRng::seed_from_u64(context.seed),
@@ -124,6 +134,9 @@ impl<O: WorldObstacle<D>, const D: usize> Mppi<O, D> {
     /// One MPPI update of the nominal sequence from tracker state `tracker`.
     fn plan(&mut self, tracker: &[f64]) {
         let system = self.context.tracker.system();
+        if self.nominal.is_empty() {
+            self.nominal = vec![system.resting_control(tracker); self.settings.horizon];
+        }
         let (lo, hi): (Vec<f64>, Vec<f64>) = system.controls.iter().map(|c| (c.min, c.max)).unzip();
         let (horizon, n_control) = (self.settings.horizon, lo.len());
         let mut noises = Vec::with_capacity(self.settings.samples);

@@ -291,6 +291,19 @@ impl AffineSystem {
         self.control_range(r).argmin_dot(&Self::project(&self.g_control, p))
     }
 
+    /// The control in the box that best holds the state `s` still: the least-squares solution of
+    /// `G_u u = -f(s)`, clamped to the box (a quadcopter's hover thrust; zero for a car, whose drift only
+    /// moves its position). A controller with nothing better to start from starts here.
+    pub fn resting_control(&self, s: &[f64]) -> Vec<f64> {
+        let mut f = vec![0.0; self.n_state()];
+        self.drift.eval(s, &mut f);
+        let g = &self.g_control;
+        let normal = g.transpose() * g;
+        let rhs = -(g.transpose() * nalgebra::DVector::from_vec(f));
+        let u = normal.lu().solve(&rhs).unwrap_or_else(|| nalgebra::DVector::zeros(self.n_control()));
+        self.controls.iter().zip(u.iter()).map(|(c, &u)| u.clamp(c.min, c.max)).collect()
+    }
+
     /// The tracker controls allowed at `r`: the control box, cut at zero for each control that drives a
     /// coordinate at or past one of its [`StateDim::limits`] further out (`G_u[i][j] u_j` must not be > 0
     /// at `r_i >= high`, nor < 0 at `r_i <= low`). [`AffineSystem::check_limits`] makes sure that this
