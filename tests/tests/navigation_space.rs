@@ -84,6 +84,8 @@ async fn worlds_in_space_are_generated_flown_and_drawn_and_the_other_dimension_i
         let bytes = std::fs::read(dir.path().join(figure)).unwrap_or_else(|e| panic!("{figure}: {e}"));
         assert!(bytes.starts_with(b"\x89PNG"), "{figure} is no PNG");
     }
+    let page = std::fs::read_to_string(dir.path().join("run.html")).unwrap();
+    assert!(page.contains("\"kind\":\"pillar\"") || page.contains("\"kind\":\"sphere\""), "the page holds no solid");
 
     // `sim bench` in space, split in two shards and merged: the record says the worlds have three axes and
     // draws world 1 from above and from the side; the paper's Table 1 (of its car) is not set beside it.

@@ -8,6 +8,7 @@ use fastrack_client::FastrackClient;
 use fastrack_sim::episode::{Outcome, Run, Simulator};
 use fastrack_sim::methods::Method;
 use fastrack_sim::plot::{over_time, trajectory, Outlined, View};
+use fastrack_sim::viewer::write_html;
 use fastrack_sim::world::WorldObstacle;
 use serde_json::json;
 use std::path::PathBuf;
@@ -25,7 +26,7 @@ pub(super) struct Args {
     #[arg(long, default_value = "pf")]
     method: String,
     /// Where the trajectory figure goes (a second figure, over time, goes beside it; in space the view from
-    /// above goes here and the side view beside it).
+    /// above goes here, the side view beside it, and a page to turn in a browser, `.html`).
     #[arg(long, default_value = "target/sim/run.png")]
     plot: PathBuf,
     #[command(flatten)]
@@ -91,6 +92,12 @@ async fn run_in<O: WorldObstacle<D> + Outlined<D>, const D: usize>(
     let over = args.plot.with_extension("time.png");
     over_time(&over, &run).map_err(anyhow::Error::msg)?;
     figures.push(over);
+    if D == 3 {
+        // A run in space also gets a page to turn in a browser.
+        let page = args.plot.with_extension("html");
+        write_html(&page, &world, &run, beta_l, 2.0).with_context(|| format!("writing {}", page.display()))?;
+        figures.push(page);
+    }
     print(
         json_mode,
         json!({"method": run.method, "outcome": run.outcome.label(), "time_s": run.time, "min_clearance_m": run.min_clearance,
