@@ -13,9 +13,11 @@ use fastrack_sim::methods::{Method, MethodError, MppiSettings};
 use fastrack_sim::world::{PlaneWorld, World, WorldFamily, WorldSpec};
 use fastrack_valuefn::system::{dubins4d, quad10d};
 use std::process::Command;
+use std::sync::Arc;
 
-#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn worlds_in_space_are_generated_flown_and_drawn_and_the_other_dimension_is_refused() {
+/// A server on a repository of a quad10d test bundle and a dubins4d one (`car`), and the simulator of the
+/// quad at a 0.05 s control period with runs stopped after `time_limit` seconds.
+async fn quad_server(time_limit: f64) -> (tempfile::TempDir, TestServer, Arc<Simulator>) {
     let repo = tempfile::tempdir().unwrap();
     write_test_bundle(repo.path(), &quad10d::system(), "quad10d", 1, 2);
     write_test_bundle(repo.path(), &dubins4d::system(), "car", 1, 1);
@@ -23,10 +25,16 @@ async fn worlds_in_space_are_generated_flown_and_drawn_and_the_other_dimension_i
     let settings = RunSettings {
         model: model_ref("quad10d", 0),
         control_period: Some(0.05),
-        time_limit: 2.0,
+        time_limit,
         ..RunSettings::default()
     };
-    let simulator = std::sync::Arc::new(Simulator::connect(&client, settings).await.unwrap());
+    let simulator = Arc::new(Simulator::connect(&client, settings).await.unwrap());
+    (repo, server, simulator)
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn worlds_in_space_are_generated_flown_and_drawn_and_the_other_dimension_is_refused() {
+    let (_repo, server, simulator) = quad_server(2.0).await;
     assert_eq!(simulator.dim(), 3);
     let steb = simulator.steb_radius();
 
@@ -120,16 +128,7 @@ async fn worlds_in_space_are_generated_flown_and_drawn_and_the_other_dimension_i
 /// climbing or sinking on the way, never touching a solid, the floor or the ceiling.
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn mppi_flies_quad10d_through_open_worlds_in_space() {
-    let repo = tempfile::tempdir().unwrap();
-    write_test_bundle(repo.path(), &quad10d::system(), "quad10d", 1, 2);
-    let (_server, client) = TestServer::start_serving(repo.path()).await;
-    let settings = RunSettings {
-        model: model_ref("quad10d", 0),
-        control_period: Some(0.05),
-        time_limit: 30.0,
-        ..RunSettings::default()
-    };
-    let simulator = std::sync::Arc::new(Simulator::connect(&client, settings).await.unwrap());
+    let (_repo, _server, simulator) = quad_server(30.0).await;
     for seed in 1..=2 {
         let spec =
             WorldSpec { seed, family: WorldFamily::Open, inflation: simulator.steb_radius(), ..WorldSpec::default() };
