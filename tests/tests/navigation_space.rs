@@ -64,9 +64,10 @@ async fn worlds_in_space_are_generated_flown_and_drawn_and_the_other_dimension_i
         assert!(clearance(&world.obstacles, next) > steb, "the planner at {next:?} is within the sTEB");
         planner = next;
     }
-    // 0.5 m/s along x, falling at most g dt^2 / 2 in the first period.
+    // From hover, moved at most g dt^2 / 2 vertically in the first period (a fall; full thrust lifts less)
+    // and less than a millimetre sideways (the tilt has barely begun).
     let first = run.samples[0].position;
-    assert!(norm(sub(first, world.start)) < 0.5 * 0.05 + 9.81 * 0.05 * 0.05, "first position {first:?}");
+    assert!(norm(sub(first, world.start)) <= 9.81 * 0.05 * 0.05 / 2.0 + 1e-3, "first position {first:?}");
 
     // A world in the plane for a model flying in space is refused.
     let planar: PlaneWorld = WorldSpec { seed: 2, inflation: steb, ..WorldSpec::default() }.generate().unwrap();

@@ -110,7 +110,8 @@ impl<const D: usize> Default for WorldSpec<D> {
 impl<const D: usize> WorldSpec<D> {
     /// A feasible world of the spec's family: start and goal at the middle of the left and right edges (and
     /// half way up), obstacles drawn as the family says (in space within the floor and the ceiling),
-    /// redrawn until the sTEB-inflated map has a path.
+    /// redrawn until the sTEB-inflated map has a path. The tracker starts at 0.5 m/s along +x in the plane,
+    /// at rest in space.
     pub fn generate<O: WorldObstacle<D>>(&self) -> Result<World<O, D>, WorldError> {
         let (lo, hi) = self.size_range;
         if !(lo > 0.0 && lo <= hi && hi.is_finite() && self.density >= 0.0 && self.density.is_finite()) {
@@ -155,7 +156,8 @@ impl<const D: usize> WorldSpec<D> {
                 max: bounds.1,
                 start: std::array::from_fn(|axis| if axis == 0 { 2.0 } else { middle[axis] }),
                 start_heading: std::f64::consts::FRAC_PI_2,
-                start_speed: default_start_speed(),
+                // A car starts rolling; a quadcopter starts hovering.
+                start_speed: if D == 2 { default_start_speed() } else { 0.0 },
                 goal: std::array::from_fn(|axis| if axis == 0 { self.size[0] - 2.0 } else { middle[axis] }),
                 goal_radius: default_goal_radius(),
                 obstacles,
@@ -344,6 +346,7 @@ mod tests {
             assert_eq!(world, spec(family, 1).generate().unwrap(), "{family}: same seed, same world");
             world.check_feasible(inflation).unwrap();
             assert_eq!((world.start, world.goal), ([2.0, 10.0, 3.0], [28.0, 10.0, 3.0]));
+            assert_eq!(world.start_speed, 0.0, "a quadcopter starts hovering");
             let (enclosure, own) = world.obstacles.split_at(2);
             assert_eq!(enclosure, [SpaceObstacle::Floor { height: 0.0 }, SpaceObstacle::Ceiling { height: 6.0 }]);
             let n = own.len();
