@@ -215,7 +215,7 @@ pub enum CoreError {
 /// position itself first, then points that cover the disc or ball evenly at every count. In the plane a
 /// sunflower spiral: point `k` at distance `radius sqrt((k - 1/2) / (count - 1))` and angle `k` times the
 /// golden angle `pi (3 - sqrt 5)`. In space the additive sequence of the generalized golden ratio (`u_k =
-/// frac(k / phi^i)`, i = 1, 2, 3, `phi^4 = phi + 1`) mapped to the ball by volume: distance `radius u_1^(1/3)`,
+/// frac(1/2 + k / phi^i)`, i = 1, 2, 3, `phi^4 = phi + 1`) mapped to the ball by volume: distance `radius u_1^(1/3)`,
 /// height `1 - 2 u_2` and azimuth `2 pi u_3` on the unit sphere. Deterministic, so that every implementation
 /// of the loop asks about the same points (the Python client's included).
 pub fn reset_candidates<const D: usize>(position: Point<D>, radius: f64, count: usize) -> Vec<Point<D>> {
