@@ -16,7 +16,7 @@ pub trait WorldObstacle<const D: usize>: Obstacle<D> + Serialize + DeserializeOw
 
     /// One obstacle of a random kind, placed uniformly in the workspace, of a size drawn from `sizes`: a
     /// circle's or sphere's radius, a rectangle's or box's half side (geometric mean), a quarter of a wall's
-    /// length, a pillar's radius up to twice it.
+    /// length, a pillar's radius between half of it and all of it.
     fn random(rng: &mut StdRng, bounds: (Point<D>, Point<D>), sizes: (f64, f64)) -> Self;
 
     /// A wall across the workspace at `x` (0.3 m thick, past its sides), open only where a square of side
