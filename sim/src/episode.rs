@@ -185,6 +185,35 @@ pub struct Run<O, const D: usize> {
 pub type PlaneRun = Run<PlaneObstacle, 2>;
 
 impl<O, const D: usize> Run<O, D> {
+    /// A run of `method` not yet under way: timed out at 0 s until it ends otherwise, nothing counted, with
+    /// the sensor range, sTEB radius and control period it runs with.
+    pub fn starting(method: &str, sensor_range: f64, steb_radius: f64, control_period: f64) -> Self {
+        Self {
+            method: method.to_string(),
+            outcome: Outcome::TimedOut,
+            time: 0.0,
+            samples: Vec::new(),
+            min_clearance: f64::INFINITY,
+            worst_excess: None,
+            replans: 0,
+            resets: 0,
+            held_steps: 0,
+            round_trips: 0,
+            out_of_domain: 0,
+            uncertified_steps: 0,
+            exposed_steps: 0,
+            decision_times: Vec::new(),
+            planning_times: Vec::new(),
+            beta_seconds: Vec::new(),
+            sensor_range,
+            steb_radius,
+            control_period,
+            final_path: Vec::new(),
+            visits: Vec::new(),
+            trace: None,
+        }
+    }
+
     /// The planner speed bound in use, averaged over the run's time (`None` for a method without one).
     pub fn mean_beta(&self) -> Option<f64> {
         let seconds: f64 = self.beta_seconds.iter().map(|(_, s)| s).sum();
@@ -338,30 +367,8 @@ impl Simulator {
             tracker.initial_state(&world.start, world.start_heading, world.start_speed).map_err(MethodError::Setup)?;
         let started = Controller::start(method, context, &s).await;
         let mut rng = StdRng::seed_from_u64(seed ^ 0xD15_7A6B);
-        let mut run = Run {
-            method: method.label().to_string(),
-            outcome: Outcome::TimedOut,
-            time: 0.0,
-            samples: Vec::new(),
-            min_clearance: clearance(&world.obstacles, world.start),
-            worst_excess: None,
-            replans: 0,
-            resets: 0,
-            held_steps: 0,
-            round_trips: 0,
-            out_of_domain: 0,
-            uncertified_steps: 0,
-            exposed_steps: 0,
-            decision_times: Vec::new(),
-            planning_times: Vec::new(),
-            beta_seconds: Vec::new(),
-            sensor_range: self.sensor.range,
-            steb_radius: self.steb_radius(),
-            control_period,
-            final_path: Vec::new(),
-            visits: Vec::new(),
-            trace: None,
-        };
+        let mut run = Run::starting(method.label(), self.sensor.range, self.steb_radius(), control_period);
+        run.min_clearance = clearance(&world.obstacles, world.start);
         // A method that cannot start on the server (its stream refused, a call timed out) is a failed run,
         // not a failed benchmark; a method that cannot run on this model at all is an error.
         let mut controller = match started {

@@ -179,30 +179,8 @@ mod tests {
             clearance: 1.0,
             sensed: 1,
         };
-        let run = Run::<SpaceObstacle, 3> {
-            method: "PF".into(),
-            outcome: Outcome::Reached,
-            time: 120.0,
-            samples: (0..12_000).map(sample).collect(),
-            min_clearance: 1.0,
-            worst_excess: Some(-0.1),
-            replans: 1,
-            resets: 0,
-            held_steps: 0,
-            round_trips: 1,
-            out_of_domain: 0,
-            uncertified_steps: 0,
-            exposed_steps: 0,
-            decision_times: Vec::new(),
-            planning_times: Vec::new(),
-            beta_seconds: Vec::new(),
-            sensor_range: 4.0,
-            steb_radius: 0.4,
-            control_period: 0.01,
-            final_path: Vec::new(),
-            visits: Vec::new(),
-            trace: None,
-        };
+        let mut run = Run::<SpaceObstacle, 3>::starting("PF", 4.0, 0.4, 0.01);
+        (run.outcome, run.time, run.samples) = (Outcome::Reached, 120.0, (0..12_000).map(sample).collect());
         let dir = tempfile::tempdir().unwrap();
         let path = dir.path().join("run.html");
         write_html(&path, &world, &run, 0.5, 2.0).unwrap();
