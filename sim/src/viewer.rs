@@ -5,7 +5,6 @@
 
 use crate::episode::Run;
 use crate::world::World;
-use fastrack_online::geometry::Point;
 use serde::Serialize;
 use serde_json::json;
 use std::path::Path;
@@ -37,18 +36,13 @@ pub fn write_html<O: Serialize, const D: usize>(
         .collect();
     let title = format!("{}: {} after {:.1} s", run.method, run.outcome.label(), run.time);
     let data = json!({
-        "title": title, "min": point(&world.min), "max": point(&world.max), "start": point(&world.start),
-        "goal": point(&world.goal), "goal_radius": world.goal_radius, "obstacles": world.obstacles,
+        "title": title, "min": world.min.to_vec(), "max": world.max.to_vec(), "start": world.start.to_vec(),
+        "goal": world.goal.to_vec(), "goal_radius": world.goal_radius, "obstacles": world.obstacles,
         "samples": samples, "beta_l": beta_l,
     });
     // `</` cannot end the script early inside a JSON string.
     let data = serde_json::to_string(&data).map_err(std::io::Error::other)?.replace("</", "<\\/");
     std::fs::write(path, PAGE.replace("/*DATA*/null", &data))
-}
-
-/// A point as a list, whatever its axes.
-fn point<const D: usize>(p: &Point<D>) -> Vec<f64> {
-    p.to_vec()
 }
 
 /// The page; `/*DATA*/null` is replaced by the run's JSON.
