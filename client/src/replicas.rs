@@ -11,7 +11,7 @@ use crate::ClientError;
 use std::collections::hash_map::RandomState;
 use std::hash::{BuildHasher, Hasher};
 use std::sync::atomic::{AtomicUsize, Ordering};
-use std::sync::Mutex;
+use std::sync::{Arc, Mutex};
 use std::time::{Duration, Instant};
 use tonic::transport::{Channel, Endpoint, Uri};
 
@@ -25,8 +25,36 @@ pub struct Replicas {
     next: AtomicUsize,
     /// The client's open `Track` streams per replica.
     streams: Vec<AtomicUsize>,
-    /// When each replica last refused a stream (it is left out of balancing for a while).
-    refused: Mutex<Vec<Option<Instant>>>,
+    /// What balancing weighs besides the open streams.
+    balance: Mutex<Balance>,
+}
+
+/// Per replica: when it last refused a stream (it is left out of balancing for a while), and the moves planned
+/// to it and away from it and not made yet. Planned moves count where they go, so that streams looking at the
+/// balance at the same moment do not all leave for the same lighter replica.
+#[derive(Debug)]
+struct Balance {
+    refused: Vec<Option<Instant>>,
+    incoming: Vec<usize>,
+    outgoing: Vec<usize>,
+}
+
+/// A move planned by [`Replicas::plan_move`]: counted in the balance until it is dropped (made or given up).
+#[derive(Debug)]
+pub(crate) struct PlannedMove {
+    replicas: Arc<Replicas>,
+    /// The replica the stream leaves.
+    pub from: usize,
+    /// The replica it moves to.
+    pub to: usize,
+}
+
+impl Drop for PlannedMove {
+    fn drop(&mut self) {
+        let mut balance = self.replicas.balance();
+        balance.incoming[self.to] -= 1;
+        balance.outgoing[self.from] -= 1;
+    }
 }
 
 /// One server: where it is and the channel to it (connected lazily if it was down when the client connected).
@@ -44,8 +72,10 @@ impl Replicas {
     pub fn new(replicas: Vec<Replica>) -> Self {
         let start = RandomState::new().build_hasher().finish() as usize;
         let streams = replicas.iter().map(|_| AtomicUsize::new(0)).collect();
-        let refused = Mutex::new(vec![None; replicas.len()]);
-        Self { replicas, next: AtomicUsize::new(start), streams, refused }
+        let count = replicas.len();
+        let balance =
+            Mutex::new(Balance { refused: vec![None; count], incoming: vec![0; count], outgoing: vec![0; count] });
+        Self { replicas, next: AtomicUsize::new(start), streams, balance }
     }
 
     /// How many replicas there are.
@@ -90,21 +120,29 @@ impl Replicas {
         self.streams[index].fetch_sub(1, Ordering::Relaxed);
     }
 
-    /// Remembers that `index` refused a stream: balancing leaves it alone for a while.
-    pub(crate) fn refused(&self, index: usize) {
-        self.refused.lock().unwrap_or_else(|e| e.into_inner())[index] = Some(Instant::now());
+    fn balance(&self) -> std::sync::MutexGuard<'_, Balance> {
+        self.balance.lock().unwrap_or_else(|e| e.into_inner())
     }
 
-    /// Where a stream on `from` should move to even the load: the replica with the fewest of the client's
+    /// Remembers that `index` refused a stream: balancing leaves it alone for a while.
+    pub(crate) fn refused(&self, index: usize) {
+        self.balance().refused[index] = Some(Instant::now());
+    }
+
+    /// Plans a move that evens the load for a stream on `from`: to the replica with the fewest of the client's
     /// streams, if it has at least two fewer than `from` (one move then narrows the gap) and has not refused
-    /// a stream lately.
-    pub(crate) fn lighter_than(&self, from: usize) -> Option<usize> {
-        let refused = self.refused.lock().unwrap_or_else(|e| e.into_inner());
+    /// a stream lately. Streams count where their planned moves go, until the plan is dropped.
+    pub(crate) fn plan_move(self: &Arc<Self>, from: usize) -> Option<PlannedMove> {
+        let mut balance = self.balance();
         let counts = self.stream_counts();
-        (0..self.replicas.len())
-            .filter(|&i| i != from && refused[i].is_none_or(|at| at.elapsed() >= REFUSED_PAUSE))
-            .min_by_key(|&i| counts[i])
-            .filter(|&i| counts[i] + 2 <= counts[from])
+        let load = |i: usize| (counts[i] + balance.incoming[i]).saturating_sub(balance.outgoing[i]);
+        let to = (0..self.replicas.len())
+            .filter(|&i| i != from && balance.refused[i].is_none_or(|at| at.elapsed() >= REFUSED_PAUSE))
+            .min_by_key(|&i| load(i))
+            .filter(|&i| load(i) + 2 <= load(from))?;
+        balance.incoming[to] += 1;
+        balance.outgoing[from] += 1;
+        Some(PlannedMove { replicas: Arc::clone(self), from, to })
     }
 
     /// Every replica's endpoint.
@@ -181,5 +219,53 @@ pub async fn connect_all(builders: Vec<(String, Endpoint)>) -> Result<Replicas, 
     match first_error {
         Some(error) if reached == 0 => Err(error),
         _ => Ok(Replicas::new(replicas)),
+    }
+}
+
+#[cfg(test)]
+mod tests {
+    use super::*;
+
+    /// `count` replicas nothing serves (their channels connect lazily, never here).
+    fn unserved(count: usize) -> Arc<Replicas> {
+        let replicas = (0..count)
+            .map(|i| {
+                let endpoint = format!("http://127.0.0.1:{}", 1 + i);
+                let channel = Endpoint::from_shared(endpoint.clone()).unwrap().connect_lazy();
+                Replica { endpoint, channel }
+            })
+            .collect();
+        Arc::new(Replicas::new(replicas))
+    }
+
+    fn open(replicas: &Replicas, counts: &[usize]) {
+        for (index, &count) in counts.iter().enumerate() {
+            (0..count).for_each(|_| replicas.stream_opened(index));
+        }
+    }
+
+    #[tokio::test]
+    async fn streams_looking_at_once_plan_only_the_moves_that_even_the_load() {
+        // Six streams on replica 1 look at [0, 6, 3] at the same moment: three moves to replica 0 even it.
+        let replicas = unserved(3);
+        open(&replicas, &[0, 6, 3]);
+        let plans: Vec<PlannedMove> = (0..6).filter_map(|_| replicas.plan_move(1)).collect();
+        assert_eq!(plans.iter().map(|p| (p.from, p.to)).collect::<Vec<_>>(), [(1, 0); 3]);
+        assert!(replicas.plan_move(2).is_none(), "replica 2 holds its share once the plans count");
+        // Plans given up leave the balance: the same look plans the same moves again.
+        drop(plans);
+        assert_eq!(replicas.plan_move(1).map(|p| p.to), Some(0));
+    }
+
+    #[tokio::test]
+    async fn a_replica_that_refused_is_left_out_and_one_move_narrows_the_gap() {
+        let replicas = unserved(3);
+        open(&replicas, &[0, 6, 3]);
+        replicas.refused(0);
+        let plans: Vec<PlannedMove> = (0..6).filter_map(|_| replicas.plan_move(1)).collect();
+        assert_eq!(plans.iter().map(|p| (p.from, p.to)).collect::<Vec<_>>(), [(1, 2)], "[0, 5, 4] after one");
+        let even = unserved(2);
+        open(&even, &[2, 1]);
+        assert!(even.plan_move(0).is_none(), "a gap of one is as even as it gets");
     }
 }

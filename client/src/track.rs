@@ -13,7 +13,7 @@
 //! spread evenly over the replicas that serve, and come back to one that returns, and the robot never waits
 //! for the move (a replica that refuses or does not answer is simply not moved to).
 
-use crate::replicas::replica_lost;
+use crate::replicas::{replica_lost, PlannedMove};
 use crate::{pb, ClientError, FastrackClient};
 use std::collections::VecDeque;
 use std::time::{Duration, Instant};
@@ -42,8 +42,8 @@ pub struct TrackStream {
     resent: usize,
     rebalanced: usize,
     balance_checked: Instant,
-    /// A stream being opened on a lighter replica, for the next move.
-    pending_move: Option<tokio::task::JoinHandle<Result<Opened, Refusal>>>,
+    /// A stream being opened on a lighter replica, for the next move, and the move it makes.
+    pending_move: Option<(PlannedMove, tokio::task::JoinHandle<Result<Opened, Refusal>>)>,
 }
 
 /// A stream on one replica.
@@ -138,8 +138,8 @@ impl TrackStream {
         if !self.unanswered.is_empty() {
             return;
         }
-        if let Some(pending) = self.pending_move.take_if(|task| task.is_finished()) {
-            // Finished: awaiting it does not wait.
+        if let Some((_planned, pending)) = self.pending_move.take_if(|(_, task)| task.is_finished()) {
+            // Finished: awaiting it does not wait. The plan leaves the balance after the move is counted.
             if let Ok(Ok(opened)) = pending.await {
                 self.move_to(opened);
                 self.rebalanced += 1;
@@ -150,9 +150,10 @@ impl TrackStream {
             return;
         }
         self.balance_checked = Instant::now();
-        if let Some(lighter) = self.client.replicas.lighter_than(self.replica) {
-            let (client, open) = (self.client.clone(), self.open.clone());
-            self.pending_move = Some(tokio::spawn(async move { Self::open_on(&client, lighter, &open).await }));
+        if let Some(planned) = self.client.replicas.plan_move(self.replica) {
+            let (client, open, lighter) = (self.client.clone(), self.open.clone(), planned.to);
+            let task = tokio::spawn(async move { Self::open_on(&client, lighter, &open).await });
+            self.pending_move = Some((planned, task));
         }
     }
 
@@ -249,7 +250,7 @@ impl TrackStream {
 impl Drop for TrackStream {
     fn drop(&mut self) {
         self.client.replicas.stream_closed(self.replica);
-        if let Some(pending) = self.pending_move.take() {
+        if let Some((_planned, pending)) = self.pending_move.take() {
             pending.abort();
         }
     }

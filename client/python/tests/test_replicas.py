@@ -16,6 +16,7 @@ import pytest
 
 import fastrack
 from conftest import MODEL, Server, free_port
+from fastrack.replicas import StreamCounts
 from test_track import robot_state
 
 TICKS = 300
@@ -329,6 +330,37 @@ def within(limit_s: float, what: str, done: Callable[[], bool]) -> None:
     while not done():
         assert time.monotonic() < end, f"{what} not within {limit_s} s"
         time.sleep(0.05)
+
+
+def counts_holding(open_streams: list[int]) -> StreamCounts:
+    counts = StreamCounts([f"r{i}" for i in range(len(open_streams))])
+    for i, n in enumerate(open_streams):
+        for _ in range(n):
+            counts.moved(None, f"r{i}")
+    return counts
+
+
+def test_streams_looking_at_once_plan_only_the_moves_that_even_the_load() -> None:
+    # Six streams on r1 look at [0, 6, 3] at the same moment: three moves to r0 even it (without counting the
+    # planned moves all six would leave, and the load would swing from replica to replica).
+    counts = counts_holding([0, 6, 3])
+    plans = [move for move in (counts.plan_move("r1") for _ in range(6)) if move is not None]
+    assert [(m.source, m.to) for m in plans] == [("r1", "r0")] * 3
+    assert counts.plan_move("r2") is None, "r2 holds its share once the plans count"
+    assert counts.counts() == [0, 6, 3], "a plan is not a move"
+    for move in plans:
+        move.release()
+        move.release()  # once only
+    again = counts.plan_move("r1")
+    assert again is not None and again.to == "r0", "released plans leave the balance"
+
+
+def test_a_replica_that_refused_is_left_out_and_one_move_narrows_the_gap() -> None:
+    counts = counts_holding([0, 6, 3])
+    counts.refused("r0")
+    plans = [move for move in (counts.plan_move("r1") for _ in range(6)) if move is not None]
+    assert [(m.source, m.to) for m in plans] == [("r1", "r2")], "[0, 5, 4] after one move"
+    assert counts_holding([2, 1]).plan_move("r0") is None, "a gap of one is as even as it gets"
 
 
 def test_streams_spread_over_the_replicas_and_come_back_to_one_that_returns(replicas: list[Server]) -> None:

@@ -63,11 +63,16 @@ REFUSED_PAUSE_S = 5.0
 
 class StreamCounts:
     """A client's open ``Track`` streams per replica, by which streams balance themselves over the replicas
-    that serve (a replica that returns gets its share back); thread-safe."""
+    that serve (a replica that returns gets its share back); thread-safe.
+
+    Moves planned to even the load and not made yet count where they go, so that streams looking at the
+    balance at the same moment do not all leave for the same lighter replica."""
 
     def __init__(self, endpoints: Sequence[str]) -> None:
         self.endpoints = tuple(endpoints)
         self._open = dict.fromkeys(self.endpoints, 0)
+        self._incoming = dict.fromkeys(self.endpoints, 0)
+        self._outgoing = dict.fromkeys(self.endpoints, 0)
         self._refused: dict[str, float] = {}
         self._lock = threading.Lock()
 
@@ -89,19 +94,45 @@ class StreamCounts:
         with self._lock:
             self._refused[endpoint] = time.monotonic()
 
-    def lighter_than(self, endpoint: str) -> str | None:
-        """Where a stream on ``endpoint`` should move to even the load: the replica with the fewest of the
-        client's streams, if it has at least two fewer and has not refused a stream lately."""
+    def plan_move(self, endpoint: str) -> PlannedMove | None:
+        """Plans a move that evens the load for a stream on ``endpoint``: to the replica with the fewest of the
+        client's streams, if it has at least two fewer (one move then narrows the gap) and has not refused a
+        stream lately. The move counts where it goes until :meth:`PlannedMove.release`."""
         now = time.monotonic()
         with self._lock:
+            def load(e: str) -> int:
+                return self._open.get(e, 0) + self._incoming.get(e, 0) - self._outgoing.get(e, 0)
+
             candidates = [
                 e for e in self.endpoints
                 if e != endpoint and now - self._refused.get(e, -REFUSED_PAUSE_S) >= REFUSED_PAUSE_S
             ]
-            lightest = min(candidates, key=lambda e: self._open[e], default=None)
-            if lightest is None or self._open[lightest] + 2 > self._open.get(endpoint, 0):
+            lightest = min(candidates, key=load, default=None)
+            if lightest is None or load(lightest) + 2 > load(endpoint):
                 return None
-            return lightest
+            self._incoming[lightest] += 1
+            self._outgoing[endpoint] += 1
+            return PlannedMove(self, endpoint, lightest)
+
+    def _release(self, move: PlannedMove) -> None:
+        with self._lock:
+            self._incoming[move.to] -= 1
+            self._outgoing[move.source] -= 1
+
+
+class PlannedMove:
+    """A move planned by :meth:`StreamCounts.plan_move`, counted in the balance until released (made or
+    given up)."""
+
+    def __init__(self, counts: StreamCounts, source: str, to: str) -> None:
+        self._counts, self.source, self.to = counts, source, to
+        self._released = False
+
+    def release(self) -> None:
+        """Takes the move out of the balance (once; later calls do nothing)."""
+        if not self._released:
+            self._released = True
+            self._counts._release(self)
 
 
 def replica_lost(error: FastrackError) -> bool:

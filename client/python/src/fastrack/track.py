@@ -46,7 +46,7 @@ import numpy.typing as npt
 
 from . import convert
 from .errors import FastrackError, Internal, Unavailable, from_rpc_error, from_status
-from .replicas import BALANCE_EVERY_S, StreamCounts, all_unavailable, replica_lost
+from .replicas import BALANCE_EVERY_S, PlannedMove, StreamCounts, all_unavailable, replica_lost
 from .results import TrackReply
 from .v1 import safety_pb2
 
@@ -62,15 +62,15 @@ class _BalancePace:
     def __init__(self) -> None:
         self._checked = time.monotonic()
 
-    def target(self, counts: StreamCounts, stubs: dict[str, Stub], endpoint: str) -> tuple[str, Stub] | None:
-        """The replica (endpoint and stub) a stream on ``endpoint`` should move to, if it is time to look and
-        one has at least two fewer of the client's streams. ``stubs`` are the client's, by endpoint: looking
-        must not turn the client's round-robin, which places new streams."""
+    def target(self, counts: StreamCounts, stubs: dict[str, Stub], endpoint: str) -> tuple[PlannedMove, Stub] | None:
+        """The move (planned in ``counts``) and the stub of the replica a stream on ``endpoint`` should move to,
+        if it is time to look and one has at least two fewer of the client's streams. ``stubs`` are the
+        client's, by endpoint: looking must not turn the client's round-robin, which places new streams."""
         if time.monotonic() - self._checked < BALANCE_EVERY_S:
             return None
         self._checked = time.monotonic()
-        lighter = counts.lighter_than(endpoint)
-        return None if lighter is None else (lighter, stubs[lighter])
+        move = counts.plan_move(endpoint)
+        return None if move is None else (move, stubs[move.to])
 
 
 class _SyncOpened:
@@ -191,6 +191,8 @@ class _Stream(Generic[Stub]):
         self._lost = False
         self._replica_count = 1
         self._pace = _BalancePace()
+        self._planned: PlannedMove | None = None
+        """The move to a lighter replica being opened, counted in the client's balance until made or given up."""
         self._stubs: dict[str, Stub] = {}
         self.reopened = 0
         """How often the stream moved to another replica."""
@@ -225,8 +227,19 @@ class _Stream(Generic[Stub]):
             self.resent += resent
 
     def _balance_target(self) -> tuple[str, Stub] | None:
-        """The lighter replica to open a second stream on, when it is time to look and one is."""
-        return self._pace.target(self._counts, self._stubs, self.endpoint)
+        """The lighter replica (endpoint and stub) to open a second stream on, when it is time to look and one
+        is; the move is planned in the client's balance until :meth:`_move_settled`."""
+        target = self._pace.target(self._counts, self._stubs, self.endpoint)
+        if target is None:
+            return None
+        self._planned, stub = target
+        return self._planned.to, stub
+
+    def _move_settled(self) -> None:
+        """The planned move was made or given up: it leaves the client's balance."""
+        if self._planned is not None:
+            self._planned.release()
+            self._planned = None
 
     def _give_up(self) -> None:
         """No replica took the stream: the ticks waiting are dropped, the next send tries again."""
@@ -293,6 +306,7 @@ class TrackStream(_Stream[SyncTrackStub]):
                     self._abandon()
                     self._switch(opened)
                     self.rebalanced += 1
+                self._move_settled()
             return
         target = self._balance_target()
         if target is None:
@@ -411,6 +425,7 @@ class TrackStream(_Stream[SyncTrackStub]):
         self._counts.moved(self.endpoint or None, None)
         if self._move:
             _discard(self._move[0])
+        self._move_settled()
         self._requests.put(None)
         if self._call is None:
             return
@@ -506,6 +521,7 @@ class AsyncTrackStream(_Stream[AsyncTrackStub]):
                         self._call.cancel()
                     self._switch(*opened)
                     self.rebalanced += 1
+                self._move_settled()
             return
         target = self._balance_target()
         if target is None:
@@ -628,6 +644,7 @@ class AsyncTrackStream(_Stream[AsyncTrackStub]):
             move.cancel()
             if move.done() and not move.cancelled() and (opened := move.result()) is not None:
                 opened[1].cancel()
+        self._move_settled()
         if cancel or self._lost or call.done():
             call.cancel()
             return
