@@ -308,10 +308,10 @@ impl<O: Obstacle<D>, const D: usize> LoopCore<O, D> {
         settings.check()?;
         if view.planner_to_state.len() != D * view.n_state {
             return Err(CoreError::Setup(format!(
-                "Q has {} entries; a {D}-D planner in a {}-D state needs {}",
-                view.planner_to_state.len(),
+                "the model's planner moves {} axes of its {}-D state (Q has {} entries); this loop's planner moves {D}",
+                view.planner_to_state.len() as f64 / view.n_state.max(1) as f64,
                 view.n_state,
-                D * view.n_state
+                view.planner_to_state.len()
             )));
         }
         let beta_u =
@@ -373,7 +373,7 @@ impl<O: Obstacle<D>, const D: usize> LoopCore<O, D> {
     /// `r = s - Q p`.
     pub fn relative_state(&self, tracker: &[f64], p: Point<D>) -> Vec<f64> {
         let q = &self.view.planner_to_state;
-        (0..self.view.n_state).map(|i| tracker[i] - (0..D).map(|j| q[D * i + j] * p[j]).sum::<f64>()).collect()
+        (0..self.view.n_state).map(|i| (0..D).fold(tracker[i], |r, j| r - q[D * i + j] * p[j])).collect()
     }
 
     /// Begins the step for tracker state `tracker` and the obstacles sensed now: remembers them, applies

@@ -219,6 +219,42 @@ mod tests {
     }
 
     #[test]
+    fn in_space_it_climbs_away_from_the_floor_where_that_is_faster() {
+        // 1 m above the floor the rule allows beta_l (bound 0.3 fits half of 1 m); 4 m up, between the floor
+        // and a ceiling at 8 m, beta_u. The shortest path stays low; the fastest climbs.
+        use crate::geometry::SpaceObstacle;
+        let solids = [SpaceObstacle::Floor { height: 0.0 }, SpaceObstacle::Ceiling { height: 8.0 }];
+        let speeds = table();
+        let request = PlanRequest {
+            start: [0.0, 0.0, 1.0],
+            goal: [20.0, 0.0, 1.0],
+            obstacles: &solids,
+            inflation: 0.3,
+            bounds: ([-1.0, -3.0, 0.0], [21.0, 3.0, 8.0]),
+            speeds: &speeds,
+            rule: SpeedRule::HalfDistance,
+        };
+        let seconds = |path: &[Point<3>]| {
+            let speed =
+                SpeedMap { obstacles: &solids[..], speeds: &speeds, rule: request.rule, known: RefCell::default() };
+            path.windows(2).map(|w| segment_seconds(w[0], w[1], 0.01, &speed)).sum::<f64>()
+        };
+        let shortest = GridAStar { cell: 0.25 }.plan(&request).unwrap();
+        let fastest = FastestPath { cell: 0.25 }.plan(&request).unwrap();
+        assert!(shortest.iter().all(|p| (p[2] - 1.0).abs() < 1e-9), "the shortest path stays low: {shortest:?}");
+        assert!(fastest.iter().any(|p| p[2] > 3.0), "the fastest path did not climb: {fastest:?}");
+        assert!(
+            seconds(&fastest) < 0.6 * seconds(&shortest),
+            "{} s against {} s",
+            seconds(&fastest),
+            seconds(&shortest)
+        );
+        for segment in fastest.windows(2) {
+            assert!(segment_is_free(&solids, segment[0], segment[1], 0.3), "{segment:?} cuts the inflation");
+        }
+    }
+
+    #[test]
     fn without_a_table_or_with_a_blocked_goal_it_says_why() {
         assert!(matches!(FastestPath::default().plan(&request(&[], &[])), Err(PlanError::Settings(_))));
         let on_goal = [PlaneObstacle::Circle { center: [20.0, 0.1], radius: 0.5 }];

@@ -52,17 +52,17 @@ async fn a_loop_in_space_steps_around_a_pillar_on_a_quad_and_refuses_a_planar_mo
         assert!(segment_is_free(&sensed, segment[0], segment[1], step.steb_radius), "{segment:?} cuts the sTEB");
     }
 
-    // A loop of the other dimension is refused at its start, naming the planner's.
+    // A loop of the other dimension is refused at its start, naming the model's planner axes and its own.
     let planar = LoopSettings::new(model_ref("quad", 0), 0.1, [10.0, 0.0], ([-2.0, -3.0], [12.0, 3.0]));
     let refused = OnlineLoop::<PlaneObstacle, 2>::start(&client, planar, [0.0, 0.0]).await.err();
     assert!(
-        matches!(&refused, Some(LoopError::Core(CoreError::Setup(why))) if why.contains("2-D planner")),
+        matches!(&refused, Some(LoopError::Core(CoreError::Setup(why))) if why.contains("moves 3 axes of its 10-D state") && why.ends_with("moves 2")),
         "{refused:?}"
     );
     let spatial = LoopSettings { model: model_ref("car", 0), ..settings };
     let refused = OnlineLoop::<SpaceObstacle, 3>::start(&client, spatial, [0.0, 0.0, 1.0]).await.err();
     assert!(
-        matches!(&refused, Some(LoopError::Core(CoreError::Setup(why))) if why.contains("3-D planner")),
+        matches!(&refused, Some(LoopError::Core(CoreError::Setup(why))) if why.contains("moves 2 axes of its 4-D state") && why.ends_with("moves 3")),
         "{refused:?}"
     );
 }

@@ -84,8 +84,7 @@ impl Obstacle<2> for PlaneObstacle {
         match self {
             PlaneObstacle::Circle { center, radius } => (point_segment_distance(*center, a, b) - radius).max(0.0),
             PlaneObstacle::Rectangle { min, max } => {
-                let inside = |p: Point| p[0] >= min[0] && p[0] <= max[0] && p[1] >= min[1] && p[1] <= max[1];
-                if inside(a) || inside(b) {
+                if super::inside(a, (*min, *max)) || super::inside(b, (*min, *max)) {
                     return 0.0;
                 }
                 let corners = [*min, [max[0], min[1]], *max, [min[0], max[1]]];

@@ -106,8 +106,8 @@ pub enum WorldError {
     },
 }
 
-/// Longest side of a world's workspace (m): the planner searches a grid of it, at most 2,000 cells of 0.1 m
-/// a side.
+/// Longest side of a world's workspace (m): the planner searches a grid of it, in the plane at most 2,000
+/// cells of 0.1 m a side.
 pub const MAX_WORKSPACE_SIDE: f64 = 200.0;
 /// Most cells of the feasibility grid a workspace may hold: 200 x 200 m in the plane, 62,500 m^3 in space
 /// (100 x 62.5 x 10 m), so that checking a world ends in seconds.

@@ -33,8 +33,12 @@ const WALL_HALF_THICKNESS: f64 = 0.15;
 /// Where an opening of `opening` starts along an axis from `lo` to `hi`, keeping 1 m from both ends (at 1 m
 /// from the low end when the axis is too short for that).
 fn opening_start(rng: &mut StdRng, lo: f64, hi: f64, opening: f64) -> f64 {
-    let first = lo + 1.0;
-    rng.random_range(first..(hi - 1.0 - opening).max(first + f64::EPSILON))
+    let (first, last) = (lo + 1.0, hi - 1.0 - opening);
+    if last > first {
+        rng.random_range(first..last)
+    } else {
+        first
+    }
 }
 
 impl WorldObstacle<2> for PlaneObstacle {

@@ -131,8 +131,7 @@ where
         "control_period_s": simulator.control_period(), "substeps": args.simulation.substeps,
         "sensor_range_m": simulator.sensor_range(), "time_limit_s": args.simulation.time_limit,
         "disturbance_m_s": args.simulation.disturbance, "state": simulator.state_names(),
-        "world": {"size": args.generation.size, "density": args.generation.density, "size_range": args.generation.size_range,
-            "feasible_for": args.generation.feasible_for}});
+        "world": args.generation.recorded::<D>()?});
     let wall_s = started.elapsed().as_secs_f64();
     if let Some(path) = &args.visits {
         write_visits(path, &config, &runs, json_mode)?;

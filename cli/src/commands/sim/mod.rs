@@ -106,7 +106,7 @@ impl Simulation {
 }
 
 /// How generated worlds look.
-#[derive(clap::Args, serde::Deserialize)]
+#[derive(clap::Args, serde::Serialize, serde::Deserialize)]
 struct Generation {
     /// Workspace width and depth, and height for a model flying in space (m); default 30,20 (30,20,6).
     #[arg(long, value_delimiter = ',', num_args = 1)]
@@ -147,6 +147,16 @@ impl Generation {
             Some(m) if m.is_finite() && m >= steb => Ok(m),
             Some(m) => anyhow::bail!("--feasible-for must be a finite sTEB of at least the model's, {steb} m; got {m}"),
         }
+    }
+
+    /// The settings as a record states them, from which the same worlds are generated again: every one,
+    /// the size resolved to the default's where none was given.
+    fn recorded<const D: usize>(&self) -> anyhow::Result<serde_json::Value> {
+        let mut value = serde_json::to_value(self)?;
+        if self.size.is_empty() {
+            value["size"] = serde_json::json!(WorldSpec::<D>::default().size.to_vec());
+        }
+        Ok(value)
     }
 
     fn spec<const D: usize>(&self, seed: u64, inflation: f64) -> anyhow::Result<WorldSpec<D>> {
