@@ -5,11 +5,13 @@ once, in order."""
 from __future__ import annotations
 
 import asyncio
+import contextlib
 import signal
+import socket
 import threading
 import time
 from collections import Counter
-from collections.abc import Callable
+from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
 
 import pytest
@@ -267,6 +269,54 @@ async def test_async_dead_address_beside_a_live_one(server: Server) -> None:
             async with client.track(MODEL) as robot:
                 assert robot.endpoint == server.address
                 assert (await robot.tick(*robot_state(0, 0))).seq == 0
+
+
+@contextlib.contextmanager
+def silent_replica() -> Iterator[str]:
+    """An address that takes connections and never says a word (a frozen server)."""
+    listener = socket.create_server(("127.0.0.1", 0))
+    held: list[socket.socket] = []
+
+    def hold() -> None:
+        with contextlib.suppress(OSError):
+            while True:
+                held.append(listener.accept()[0])
+
+    threading.Thread(target=hold, daemon=True).start()
+    try:
+        yield f"127.0.0.1:{listener.getsockname()[1]}"
+    finally:
+        listener.close()
+        for connection in held:
+            connection.close()
+
+
+def test_a_replica_that_never_answers_is_passed_over_when_a_stream_opens(server: Server) -> None:
+    with silent_replica() as silent, fastrack.Client(f"{silent},{server.address}", timeout=0.5) as client:
+        for _ in range(2):  # unary calls are not passed over on a deadline: one of two reaches the server
+            with contextlib.suppress(fastrack.DeadlineExceeded):
+                client.get_model(MODEL)
+        started = time.monotonic()
+        for i in range(4):
+            with client.track(MODEL) as robot:
+                assert robot.endpoint == server.address
+                assert robot.tick(*robot_state(0, i)).seq == 0
+        # Round-robin sent two of the four opens to the silent replica first: each waited out the deadline.
+        assert time.monotonic() - started >= 1.0
+
+
+async def test_async_a_replica_that_never_answers_is_passed_over_when_a_stream_opens(server: Server) -> None:
+    with silent_replica() as silent:
+        async with fastrack.AsyncClient(f"{silent},{server.address}", timeout=0.5) as client:
+            for _ in range(2):
+                with contextlib.suppress(fastrack.DeadlineExceeded):
+                    await client.get_model(MODEL)
+            started = time.monotonic()
+            for i in range(4):
+                async with client.track(MODEL) as robot:
+                    assert robot.endpoint == server.address
+                    assert (await robot.tick(*robot_state(0, i))).seq == 0
+            assert time.monotonic() - started >= 1.0
 
 
 def test_only_dead_addresses_fail_clearly() -> None:

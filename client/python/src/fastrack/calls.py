@@ -102,7 +102,7 @@ class Connection(Generic[ChannelT]):
         """What a new ``Track`` stream needs (the model's sizes fetched already), opening on ``stubs``."""
         dims = self._dims[(model, version)]
         open_request = convert.open_stream(model, version, idle_timeout)
-        return Opening(stubs, self._streams, self.settings.metadata, dims, open_request)
+        return Opening(stubs, self._streams, self.settings.metadata, dims, open_request, self.settings.timeout)
 
     def _remember(self, model: str, version: int, info: models_pb2.ModelInfo) -> models_pb2.ModelInfo:
         self._dims[(model, version)] = convert.Dims.of(info)

@@ -12,9 +12,11 @@ continue"; its connection breaks, as a killed server's does; or it closes with t
 on the client's next replica (each other replica tried once, the lost one last), sends its ``open`` message
 and the unanswered ticks again, and carries on: the robot sees every tick answered exactly once, in order.
 A replica lost while no tick was waiting is noticed at the next ``send``, which reopens first.
-``endpoint`` is the replica serving the stream now, ``reopened`` how often it moved and ``resent`` how many
-ticks were sent again. When no replica takes the stream, :class:`~fastrack.Unavailable` says what ended it;
-the ticks still waiting are dropped, and the next ``send`` tries the replicas again.
+A replica that does not answer an open within the client's ``timeout`` (one that takes the connection and
+says nothing, as a frozen server does) is passed over as gone. ``endpoint`` is the replica serving the
+stream now, ``reopened`` how often it moved and ``resent`` how many ticks were sent again. When no replica
+takes the stream, :class:`~fastrack.Unavailable` says what ended it; the ticks still waiting are dropped,
+and the next ``send`` tries the replicas again.
 
 Nothing else needs carrying over: a reply depends on its tick alone, and the bound in force (``beta_old``)
 is the robot's own online loop's.
@@ -124,6 +126,25 @@ class _Sequence:
         return convert.track_reply(response.reply)
 
 
+def _answered_within(call: grpc._CallIterator[safety_pb2.TrackResponse], seconds: float) -> bool:
+    """Waits at most ``seconds`` for the server's answer to an open (its headers, or the end of the call);
+    False if none came. Raises what waiting raised."""
+    failure: list[BaseException] = []
+
+    def wait() -> None:
+        try:
+            call.initial_metadata()
+        except BaseException as e:  # handed to the caller's thread
+            failure.append(e)
+
+    waiting = threading.Thread(target=wait, name="fastrack-track-open", daemon=True)
+    waiting.start()
+    waiting.join(seconds)
+    if failure:
+        raise failure[0]
+    return not waiting.is_alive()
+
+
 def _order(replicas: list[tuple[str, Stub]], lost: str | None) -> list[tuple[str, Stub]]:
     """The replicas to try, the one just lost last (it may be back, but the others are likelier to answer)."""
     return [r for r in replicas if r[0] != lost] + [r for r in replicas if r[0] == lost]
@@ -175,6 +196,9 @@ class Opening(Generic[Stub]):
     """The model's vector sizes."""
     open_request: safety_pb2.TrackRequest
     """The stream's first message."""
+    open_timeout: float
+    """Seconds a replica may take to answer the open before it is passed over as gone (a replica that takes
+    the connection and never answers is as good as gone)."""
 
 
 class _Stream(Generic[Stub]):
@@ -186,6 +210,7 @@ class _Stream(Generic[Stub]):
         self._metadata = opening.metadata
         self._dims = opening.dims
         self._open_request = opening.open_request
+        self._open_timeout = opening.open_timeout
         self._sequence = _Sequence()
         self._closed = False
         self._lost = False
@@ -241,6 +266,10 @@ class _Stream(Generic[Stub]):
             self._planned.release()
             self._planned = None
 
+    def _silent(self, endpoint: str) -> Unavailable:
+        """The error of a replica that did not answer an open in time."""
+        return Unavailable(f"{endpoint} did not open the stream within {self._open_timeout} s")
+
     def _give_up(self) -> None:
         """No replica took the stream: the ticks waiting are dropped, the next send tries again."""
         self._lost = True
@@ -283,7 +312,11 @@ class TrackStream(_Stream[SyncTrackStub]):
         requests: queue.SimpleQueue[safety_pb2.TrackRequest | None] = queue.SimpleQueue()
         requests.put(self._open_request)
         call = stub(iter(requests.get, None), metadata=self._metadata)
-        call.initial_metadata()  # the server answers the open with its headers, or ends the call
+        # The server answers the open with its headers, or ends the call; one that does neither is gone.
+        if not _answered_within(call, self._open_timeout):
+            requests.put(None)
+            call.cancel()
+            return self._silent(endpoint)
         if not call.is_active():
             requests.put(None)  # ends the thread feeding the call
             return from_status(call.code(), call.details() or "the Track stream ended at once")
@@ -466,7 +499,7 @@ class AsyncTrackStream(_Stream[AsyncTrackStub]):
         failures: list[tuple[str, FastrackError]] = []
         for endpoint, stub in self._candidates(lost):
             resend = self._sequence.requests()
-            call, error = await self._open_on(stub, resend)
+            call, error = await self._open_on(endpoint, stub, resend)
             if error is None:
                 self._switch(endpoint, call)
                 self._opened(lost, len(resend))
@@ -477,14 +510,20 @@ class AsyncTrackStream(_Stream[AsyncTrackStub]):
         raise _refused(why, failures, raise_as_is)
 
     async def _open_on(
-        self, stub: AsyncTrackStub, resend: list[safety_pb2.TrackRequest]
+        self, endpoint: str, stub: AsyncTrackStub, resend: list[safety_pb2.TrackRequest]
     ) -> tuple[TrackCall, FastrackError | None]:
         """Opens the stream on one replica and sends ``resend`` there: the call, and the error it ended with
         at once (None: open)."""
         call = stub(metadata=self._metadata)
-        try:
+
+        async def answered() -> None:
             await call.write(self._open_request)
-            await call.initial_metadata()  # the server answers the open with its headers, or ends the call
+            await call.initial_metadata()
+
+        try:
+            # The server answers the open with its headers, or ends the call; one that does neither (or never
+            # takes the connection) is gone.
+            await asyncio.wait_for(answered(), self._open_timeout)
             if not call.done():
                 for request in resend:
                     await call.write(request)
@@ -492,6 +531,9 @@ class AsyncTrackStream(_Stream[AsyncTrackStub]):
             error: FastrackError | None = from_rpc_error(e)
         except asyncio.InvalidStateError:
             error = None
+        except TimeoutError:
+            call.cancel()
+            return call, self._silent(endpoint)
         else:
             error = None
         if call.done():
@@ -528,7 +570,7 @@ class AsyncTrackStream(_Stream[AsyncTrackStub]):
             return
 
         async def open_there(endpoint: str, stub: AsyncTrackStub) -> tuple[str, TrackCall] | None:
-            call, error = await self._open_on(stub, [])
+            call, error = await self._open_on(endpoint, stub, [])
             if error is not None:
                 self._counts.refused(endpoint)
                 return None
