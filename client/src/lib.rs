@@ -307,7 +307,7 @@ impl FastrackClient {
     }
 
     /// An idempotent unary call: on the next replica, and again on the following ones while they are gone
-    /// (`UNAVAILABLE` or a failed connection; each replica at most once).
+    /// (`UNAVAILABLE`, a failed connection, or no answer within the deadline; each replica at most once).
     async fn idempotent<M, R, F, Fut>(&self, message: M, call: F) -> Result<R, ClientError>
     where
         M: Clone,

@@ -139,7 +139,7 @@ async fn a_client_connects_while_a_replica_is_down_and_a_dead_address_alone_is_a
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
-async fn a_replica_that_never_answers_is_passed_over_when_a_stream_opens() {
+async fn a_replica_that_never_answers_is_passed_over_by_calls_and_stream_opens() {
     let (servers, _) = replicas(1).await;
     // It takes connections and says nothing.
     let silent = tokio::net::TcpListener::bind("127.0.0.1:0").await.unwrap();
@@ -152,6 +152,13 @@ async fn a_replica_that_never_answers_is_passed_over_when_a_stream_opens() {
     });
     let options = ClientOptions { request_timeout: Duration::from_millis(500), ..ClientOptions::default() };
     let client = FastrackClient::connect(&address, options).await.unwrap();
+    // An idempotent unary call that meets it goes on to the next replica once its deadline passes.
+    for call in 0..2 {
+        let started = Instant::now();
+        let model = client.get_model(model_ref("dubins4d", 0)).await.unwrap();
+        assert_eq!(model.name, "dubins4d");
+        assert!(started.elapsed() < Duration::from_secs(2), "call {call}: {:?}", started.elapsed());
+    }
     let started = Instant::now();
     for robot in 0..4 {
         let mut stream = client.track(model_ref("dubins4d", 0), 0.0).await.unwrap();

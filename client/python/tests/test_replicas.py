@@ -291,11 +291,11 @@ def silent_replica() -> Iterator[str]:
             connection.close()
 
 
-def test_a_replica_that_never_answers_is_passed_over_when_a_stream_opens(server: Server) -> None:
+def test_a_replica_that_never_answers_is_passed_over_by_calls_and_stream_opens(server: Server) -> None:
     with silent_replica() as silent, fastrack.Client(f"{silent},{server.address}", timeout=0.5) as client:
-        for _ in range(2):  # unary calls are not passed over on a deadline: one of two reaches the server
-            with contextlib.suppress(fastrack.DeadlineExceeded):
-                client.get_model(MODEL)
+        # An idempotent unary call that meets the silent replica goes on to the next once its deadline passes.
+        for _ in range(2):
+            assert client.get_model(MODEL).name == MODEL
         started = time.monotonic()
         for i in range(4):
             with client.track(MODEL) as robot:
@@ -305,18 +305,27 @@ def test_a_replica_that_never_answers_is_passed_over_when_a_stream_opens(server:
         assert time.monotonic() - started >= 1.0
 
 
-async def test_async_a_replica_that_never_answers_is_passed_over_when_a_stream_opens(server: Server) -> None:
+async def test_async_a_replica_that_never_answers_is_passed_over_by_calls_and_stream_opens(server: Server) -> None:
     with silent_replica() as silent:
         async with fastrack.AsyncClient(f"{silent},{server.address}", timeout=0.5) as client:
             for _ in range(2):
-                with contextlib.suppress(fastrack.DeadlineExceeded):
-                    await client.get_model(MODEL)
+                assert (await client.get_model(MODEL)).name == MODEL
             started = time.monotonic()
             for i in range(4):
                 async with client.track(MODEL) as robot:
                     assert robot.endpoint == server.address
                     assert (await robot.tick(*robot_state(0, i))).seq == 0
             assert time.monotonic() - started >= 1.0
+
+
+def test_a_replica_that_never_answers_alone_fails_once_with_its_deadline() -> None:
+    with silent_replica() as silent, fastrack.Client(silent, timeout=0.3, retry=fastrack.Retry(attempts=3)) as client:
+        started = time.monotonic()
+        with pytest.raises(fastrack.DeadlineExceeded):
+            client.list_models()
+        assert time.monotonic() - started < 0.3 * 2, "no second pass after a deadline"
+        with pytest.raises(fastrack.DeadlineExceeded):
+            client.unload_model("no-such-model")  # not idempotent: raised as it is
 
 
 def test_only_dead_addresses_fail_clearly() -> None:

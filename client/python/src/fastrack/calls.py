@@ -17,7 +17,7 @@ from grpc_health.v1 import health_pb2
 
 from . import convert, results
 from .channel import DEFAULT_TIMEOUT_S, NO_RETRY, Endpoint, Retry, Settings, Tls
-from .errors import FastrackError, Unavailable, from_rpc_error
+from .errors import DeadlineExceeded, FastrackError, Unavailable, from_rpc_error
 from .replicas import Rotation, StreamCounts, all_unavailable
 from .track import Opening, Stub
 from .v1 import models_pb2, models_pb2_grpc, safety_pb2, safety_pb2_grpc
@@ -115,7 +115,9 @@ R = TypeVar("R", bound=Replica[Any])
 class Attempts(Generic[R]):
     """The passes one unary call makes over the replicas. Idempotent: each pass tries every replica once from
     the next in turn, and passes repeat with backoff as the retry policy says; otherwise one replica, once.
-    A failure other than ``UNAVAILABLE`` ends the call at once."""
+    A failure other than ``UNAVAILABLE`` ends the call at once, but for an idempotent call's
+    ``DEADLINE_EXCEEDED``: a replica that does not answer in time (a frozen server) is passed over for the
+    next, and no pass follows the one it happened in (each replica had its deadline)."""
 
     def __init__(self, policy: Retry, replicas: Rotation[R], idempotent: bool) -> None:
         self._policy = policy
@@ -126,14 +128,17 @@ class Attempts(Generic[R]):
     def passes(self) -> Iterator[tuple[float, list[R]]]:
         """Each pass: the seconds to wait before it, and the replicas it tries in order."""
         for attempt in range(self._policy.attempts):
+            if any(isinstance(failure, DeadlineExceeded) for _, failure in self._failures):
+                return
             self._failures = []
             wait = 0.0 if attempt == 0 else self._policy.delay(attempt - 1)
             yield wait, self._replicas.rotation() if self._idempotent else [self._replicas.next()]
 
     def failed(self, replica: R, error: grpc.RpcError) -> None:
-        """Records a replica's failure, or raises it when it is not ``UNAVAILABLE``."""
+        """Records a replica's failure, or raises it when it does not pass the call over to the next."""
         failure = from_rpc_error(error)
-        if not isinstance(failure, Unavailable):
+        passed_over = isinstance(failure, Unavailable) or (self._idempotent and isinstance(failure, DeadlineExceeded))
+        if not passed_over:
             raise failure
         self._failures.append((replica.endpoint, failure))
 
