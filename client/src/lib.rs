@@ -41,7 +41,8 @@ use tonic_health::pb::health_client::HealthClient;
 pub struct ClientOptions {
     /// Limit on establishing the connection.
     pub connect_timeout: Duration,
-    /// Deadline of each unary call (sent to the server as `grpc-timeout`).
+    /// Deadline of each unary call (sent to the server as `grpc-timeout`), of a `Track` stream's open and of
+    /// each tick's reply (a replica that misses it is passed over as gone).
     pub request_timeout: Duration,
     /// Bearer token sent as `authorization: Bearer <token>` on every call (unary and streams).
     pub bearer_token: Option<String>,

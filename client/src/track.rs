@@ -2,9 +2,10 @@
 //!
 //! A stream remembers the ticks it sent and that are not answered yet. When its server goes away (the stream
 //! ends with `UNAVAILABLE`, as a draining replica's streams do; its connection breaks, as a killed replica's
-//! does; or it closes with ticks unanswered), it reopens on the client's next replica and sends those ticks
-//! again, so every tick is answered exactly once as seen by the robot. A stream that every replica in turn
-//! takes and loses without answering gives up. Nothing else needs carrying over: a reply depends on its tick
+//! does; it closes with ticks unanswered; or it leaves a tick unanswered past the client's request deadline,
+//! as a frozen one does), it reopens on the client's next replica and sends those ticks again, so every tick
+//! is answered exactly once as seen by the robot. A stream that every replica in turn takes and loses without
+//! answering gives up. Nothing else needs carrying over: a reply depends on its tick
 //! alone, and the bound in force (`beta_old`) is the robot's own loop's.
 //!
 //! For the same reason a stream can move when nothing is lost: at most once every [`BALANCE_EVERY`], a
@@ -202,7 +203,18 @@ impl TrackStream {
     /// reported here, and the next send reopens the stream elsewhere.
     pub async fn recv(&mut self) -> Result<Option<pb::TrackReply>, ClientError> {
         loop {
-            match self.replies.message().await {
+            // A replica that leaves a tick unanswered past the client's deadline is as good as gone.
+            let deadline = self.client.request_timeout;
+            let next = if self.unanswered.is_empty() {
+                Ok(self.replies.message().await)
+            } else {
+                tokio::time::timeout(deadline, self.replies.message()).await
+            };
+            let Ok(next) = next else {
+                self.reopen(&format!("no reply within {deadline:?}")).await?;
+                continue;
+            };
+            match next {
                 Ok(Some(response)) => {
                     self.unanswered.pop_front();
                     self.moves_unanswered = 0;

@@ -349,6 +349,16 @@ impl TestServer {
         let _ = self.child.wait();
     }
 
+    /// Sends SIGSTOP: the process keeps its connections and answers nothing (a frozen server).
+    pub fn freeze(&self) {
+        let _ = Command::new("kill").arg("-STOP").arg(self.child.id().to_string()).status();
+    }
+
+    /// Sends SIGCONT after [`TestServer::freeze`].
+    pub fn thaw(&self) {
+        let _ = Command::new("kill").arg("-CONT").arg(self.child.id().to_string()).status();
+    }
+
     /// Sends SIGTERM and waits for the exit status (graceful shutdown).
     pub fn terminate(&mut self) -> std::process::ExitStatus {
         let _ = Command::new("kill").arg("-TERM").arg(self.child.id().to_string()).status();

@@ -171,6 +171,30 @@ async fn a_replica_that_never_answers_is_passed_over_by_calls_and_stream_opens()
 }
 
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
+async fn a_stream_whose_replica_freezes_moves_once_a_tick_goes_unanswered_past_the_deadline() {
+    let (servers, _) = replicas(2).await;
+    let address = servers.iter().map(|s| s.endpoint.as_str()).collect::<Vec<_>>().join(",");
+    let options = ClientOptions { request_timeout: Duration::from_millis(500), ..ClientOptions::default() };
+    let client = FastrackClient::connect(&address, options).await.unwrap();
+    let mut stream = client.track(model_ref("dubins4d", 0), 0.0).await.unwrap();
+    for seq in 0..3 {
+        assert_eq!(stream.tick(robot_tick(seq, 0)).await.unwrap().seq, seq);
+    }
+    let frozen = servers.iter().position(|s| s.endpoint == stream.endpoint()).unwrap();
+    servers[frozen].freeze();
+    // The tick sent to the frozen replica is answered by the other, once the deadline has passed.
+    let started = Instant::now();
+    let reply = stream.tick(robot_tick(3, 0)).await.unwrap();
+    let waited = started.elapsed();
+    servers[frozen].thaw();
+    assert_eq!((reply.seq, reply.error), (3, None));
+    assert_eq!(stream.endpoint(), servers[1 - frozen].endpoint);
+    assert_eq!((stream.reopened(), stream.resent()), (1, 1));
+    assert!(waited >= Duration::from_millis(500) && waited < Duration::from_secs(3), "{waited:?}");
+    assert_eq!(stream.tick(robot_tick(4, 0)).await.unwrap().seq, 4, "the stream goes on where it moved");
+}
+
+#[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn a_replica_at_its_stream_limit_passes_new_streams_to_another() {
     let models = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
     let (full, _) = TestServer::start_serving_with(&models, &["--max-track-streams", "1"]).await;

@@ -318,6 +318,48 @@ async def test_async_a_replica_that_never_answers_is_passed_over_by_calls_and_st
             assert time.monotonic() - started >= 1.0
 
 
+@contextlib.contextmanager
+def frozen(server: Server) -> Iterator[None]:
+    """The server stopped (SIGSTOP): it keeps its connections and answers nothing, until thawed."""
+    assert server.process is not None
+    server.process.send_signal(signal.SIGSTOP)
+    try:
+        yield
+    finally:
+        server.process.send_signal(signal.SIGCONT)
+
+
+def test_a_stream_whose_replica_freezes_moves_once_a_tick_goes_unanswered(replicas: list[Server]) -> None:
+    address = ",".join(r.address for r in replicas[:2])
+    with fastrack.Client(address, timeout=0.5) as client, client.track(MODEL) as robot:
+        for seq in range(3):
+            assert robot.tick(*robot_state(seq, 0)).seq == seq
+        holder = next(r for r in replicas if r.address == robot.endpoint)
+        with frozen(holder):
+            started = time.monotonic()
+            assert robot.tick(*robot_state(3, 0)).seq == 3
+            waited = time.monotonic() - started
+            assert robot.endpoint != holder.address and (robot.reopened, robot.resent) == (1, 1)
+            assert 0.5 <= waited < 3.0, waited
+            assert robot.tick(*robot_state(4, 0)).seq == 4
+
+
+async def test_async_a_stream_whose_replica_freezes_moves_once_a_tick_goes_unanswered(replicas: list[Server]) -> None:
+    address = ",".join(r.address for r in replicas[:2])
+    async with fastrack.AsyncClient(address, timeout=0.5) as client:
+        async with client.track(MODEL) as robot:
+            for seq in range(3):
+                assert (await robot.tick(*robot_state(seq, 0))).seq == seq
+            holder = next(r for r in replicas if r.address == robot.endpoint)
+            with frozen(holder):
+                started = time.monotonic()
+                assert (await robot.tick(*robot_state(3, 0))).seq == 3
+                waited = time.monotonic() - started
+                assert robot.endpoint != holder.address and (robot.reopened, robot.resent) == (1, 1)
+                assert 0.5 <= waited < 3.0, waited
+                assert (await robot.tick(*robot_state(4, 0))).seq == 4
+
+
 def test_a_replica_that_never_answers_alone_fails_once_with_its_deadline() -> None:
     with silent_replica() as silent, fastrack.Client(silent, timeout=0.3, retry=fastrack.Retry(attempts=3)) as client:
         started = time.monotonic()

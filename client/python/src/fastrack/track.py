@@ -12,8 +12,8 @@ continue"; its connection breaks, as a killed server's does; or it closes with t
 on the client's next replica (each other replica tried once, the lost one last), sends its ``open`` message
 and the unanswered ticks again, and carries on: the robot sees every tick answered exactly once, in order.
 A replica lost while no tick was waiting is noticed at the next ``send``, which reopens first.
-A replica that does not answer an open within the client's ``timeout`` (one that takes the connection and
-says nothing, as a frozen server does) is passed over as gone. ``endpoint`` is the replica serving the
+A replica that does not answer an open, or leaves a tick unanswered, within the client's ``timeout`` (one
+that takes the connection and says nothing, as a frozen server does) is passed over as gone. ``endpoint`` is the replica serving the
 stream now, ``reopened`` how often it moved and ``resent`` how many ticks were sent again. When no replica
 takes the stream, :class:`~fastrack.Unavailable` says what ended it; the ticks still waiting are dropped,
 and the next ``send`` tries the replicas again.
@@ -75,8 +75,14 @@ class _BalancePace:
         return None if move is None else (move, stubs[move.to])
 
 
+SyncReply: TypeAlias = "safety_pb2.TrackResponse | grpc.RpcError | None"
+"""What a sync stream's reader hands on: a reply, the error the call ended with, or None when the server
+closed it."""
+
+
 class _SyncOpened:
-    """A sync stream open on one replica: its endpoint, the queue feeding its ticks and the call."""
+    """A sync stream open on one replica: its endpoint, the queue feeding its ticks, the call, and the queue
+    its replies arrive in (read by a thread of its own, so that a wait for one can have a deadline)."""
 
     def __init__(
         self,
@@ -85,6 +91,17 @@ class _SyncOpened:
         call: grpc._CallIterator[safety_pb2.TrackResponse],
     ) -> None:
         self.endpoint, self.requests, self.call = endpoint, requests, call
+        self.replies: queue.SimpleQueue[SyncReply] = queue.SimpleQueue()
+        threading.Thread(target=self._read, name="fastrack-track-replies", daemon=True).start()
+
+    def _read(self) -> None:
+        try:
+            for response in self.call:
+                self.replies.put(response)
+        except grpc.RpcError as e:
+            self.replies.put(e)
+            return
+        self.replies.put(None)
 
 
 def _discard(opened: _SyncOpened | None) -> None:
@@ -196,9 +213,9 @@ class Opening(Generic[Stub]):
     """The model's vector sizes."""
     open_request: safety_pb2.TrackRequest
     """The stream's first message."""
-    open_timeout: float
-    """Seconds a replica may take to answer the open before it is passed over as gone (a replica that takes
-    the connection and never answers is as good as gone)."""
+    deadline: float
+    """Seconds a replica may take to answer the open, or a tick, before it is passed over as gone (a replica
+    that takes the connection and never answers is as good as gone)."""
 
 
 class _Stream(Generic[Stub]):
@@ -210,7 +227,7 @@ class _Stream(Generic[Stub]):
         self._metadata = opening.metadata
         self._dims = opening.dims
         self._open_request = opening.open_request
-        self._open_timeout = opening.open_timeout
+        self._deadline = opening.deadline
         self._sequence = _Sequence()
         self._closed = False
         self._lost = False
@@ -268,7 +285,11 @@ class _Stream(Generic[Stub]):
 
     def _silent(self, endpoint: str) -> Unavailable:
         """The error of a replica that did not answer an open in time."""
-        return Unavailable(f"{endpoint} did not open the stream within {self._open_timeout} s")
+        return Unavailable(f"{endpoint} did not open the stream within {self._deadline} s")
+
+    def _unanswered(self) -> str:
+        """Why a stream moves whose replica left a tick unanswered past the deadline."""
+        return f"no reply within {self._deadline} s"
 
     def _give_up(self) -> None:
         """No replica took the stream: the ticks waiting are dropped, the next send tries again."""
@@ -284,6 +305,7 @@ class TrackStream(_Stream[SyncTrackStub]):
         self._move: list[_SyncOpened | None] | None = None
         """A stream being opened in the background on a lighter replica: empty until the thread is done."""
         self._requests: queue.SimpleQueue[safety_pb2.TrackRequest | None] = queue.SimpleQueue()
+        self._replies: queue.SimpleQueue[SyncReply] = queue.SimpleQueue()
         self._call: grpc._CallIterator[safety_pb2.TrackResponse] | None = None
         self._open_somewhere(None, raise_as_is=True)
 
@@ -313,7 +335,7 @@ class TrackStream(_Stream[SyncTrackStub]):
         requests.put(self._open_request)
         call = stub(iter(requests.get, None), metadata=self._metadata)
         # The server answers the open with its headers, or ends the call; one that does neither is gone.
-        if not _answered_within(call, self._open_timeout):
+        if not _answered_within(call, self._deadline):
             requests.put(None)
             call.cancel()
             return self._silent(endpoint)
@@ -325,7 +347,8 @@ class TrackStream(_Stream[SyncTrackStub]):
     def _switch(self, opened: _SyncOpened) -> None:
         """Serves the stream from ``opened`` from now on, counting the move in the client's balance."""
         self._counts.moved(self.endpoint or None, opened.endpoint)
-        self._requests, self._call, self.endpoint, self._lost = opened.requests, opened.call, opened.endpoint, False
+        self._requests, self._replies, self._call = opened.requests, opened.replies, opened.call
+        self.endpoint, self._lost = opened.endpoint, False
 
     def _balance(self) -> None:
         """With every tick answered: moves to the stream opened in the background, if it is open; else, at most
@@ -417,19 +440,21 @@ class TrackStream(_Stream[SyncTrackStub]):
         self._sequence.check_waiting()
         moves = 0
         while True:
-            assert self._call is not None
             try:
-                response = next(self._call)
-            except StopIteration:
-                why = "the server closed the stream with ticks unanswered"
-            except grpc.RpcError as e:
-                error = from_rpc_error(e)
-                if not _movable(error):
-                    self._sequence.pending.popleft()
-                    raise error from None
-                why = _why(error)
+                reply = self._replies.get(timeout=self._deadline)
+            except queue.Empty:
+                why = self._unanswered()
             else:
-                return self._sequence.answer(response)
+                if reply is None:
+                    why = "the server closed the stream with ticks unanswered"
+                elif isinstance(reply, grpc.RpcError):
+                    error = from_rpc_error(reply)
+                    if not _movable(error):
+                        self._sequence.pending.popleft()
+                        raise error from None
+                    why = _why(error)
+                else:
+                    return self._sequence.answer(reply)
             moves += 1
             if moves > self._replica_count:  # every replica took the stream and lost it without answering
                 self._abandon()
@@ -465,11 +490,13 @@ class TrackStream(_Stream[SyncTrackStub]):
         if cancel or self._lost:
             self._call.cancel()
             return
+        # The server answers the ticks in flight and ends the call; an error it ends with instead was (or would
+        # have been) raised by recv(). A replica silent past the deadline is left.
         try:
-            for _ in self._call:
+            while isinstance(self._replies.get(timeout=self._deadline), safety_pb2.TrackResponse):
                 pass
-        except grpc.RpcError:
-            pass  # the stream had already failed; its error was (or would have been) raised by recv()
+        except queue.Empty:
+            self._call.cancel()
 
     def __enter__(self) -> TrackStream:
         return self
@@ -523,7 +550,7 @@ class AsyncTrackStream(_Stream[AsyncTrackStub]):
         try:
             # The server answers the open with its headers, or ends the call; one that does neither (or never
             # takes the connection) is gone.
-            await asyncio.wait_for(answered(), self._open_timeout)
+            await asyncio.wait_for(answered(), self._deadline)
             if not call.done():
                 for request in resend:
                     await call.write(request)
@@ -637,7 +664,9 @@ class AsyncTrackStream(_Stream[AsyncTrackStub]):
         while True:
             call = self._live_call()
             try:
-                response = await call.read()
+                response = await asyncio.wait_for(call.read(), self._deadline)
+            except TimeoutError:
+                why = self._unanswered()
             except grpc.RpcError as e:
                 error = from_rpc_error(e)
                 if not _movable(error):
