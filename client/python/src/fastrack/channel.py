@@ -114,8 +114,8 @@ class Settings:
     """``host:port``, ``http://host:port`` or ``https://host:port`` (https needs ``tls``); several separated
     by commas, one per replica."""
     timeout: float = DEFAULT_TIMEOUT_S
-    """Default deadline of unary calls, and how long a replica may take to open a ``Track`` stream before it
-    is passed over as gone, seconds."""
+    """Default deadline of unary calls, and how long a replica may take to open a ``Track`` stream or answer
+    a tick before it is passed over as gone, seconds."""
     token: str | None = field(default=None, repr=False)
     """Bearer token, sent as ``authorization: Bearer <token>`` on every call."""
     tls: Tls | None = None
