@@ -558,7 +558,7 @@ class AsyncTrackStream(_Stream[AsyncTrackStub]):
             error: FastrackError | None = from_rpc_error(e)
         except asyncio.InvalidStateError:
             error = None
-        except TimeoutError:
+        except asyncio.TimeoutError:  # the builtin TimeoutError from Python 3.11 on
             call.cancel()
             return call, self._silent(endpoint)
         else:
@@ -665,7 +665,7 @@ class AsyncTrackStream(_Stream[AsyncTrackStub]):
             call = self._live_call()
             try:
                 response = await asyncio.wait_for(call.read(), self._deadline)
-            except TimeoutError:
+            except asyncio.TimeoutError:
                 why = self._unanswered()
             except grpc.RpcError as e:
                 error = from_rpc_error(e)
