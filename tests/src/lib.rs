@@ -14,7 +14,7 @@ use fastrack_valuefn::runtime::{runtime, Evaluator, GraphDims};
 use fastrack_valuefn::system::AffineSystem;
 use std::path::{Path, PathBuf};
 use std::process::{Child, Command, Stdio};
-use std::time::Duration;
+use std::time::{Duration, Instant};
 
 /// Asserts that a call failed with gRPC status `code` and a message containing every fragment.
 pub fn expect_error<T: std::fmt::Debug>(
@@ -349,9 +349,22 @@ impl TestServer {
         let _ = self.child.wait();
     }
 
-    /// Sends SIGSTOP: the process keeps its connections and answers nothing (a frozen server).
+    /// Sends SIGSTOP and waits until every thread has stopped (a stop is delivered, not immediate): the
+    /// process keeps its connections and answers nothing (a frozen server).
     pub fn freeze(&self) {
         let _ = Command::new("kill").arg("-STOP").arg(self.child.id().to_string()).status();
+        let tasks = PathBuf::from(format!("/proc/{}/task", self.child.id()));
+        let stopped = |stat: String| stat.rsplit_once(')').is_some_and(|(_, rest)| rest.trim_start().starts_with('T'));
+        let started = Instant::now();
+        while !std::fs::read_dir(&tasks)
+            .into_iter()
+            .flatten()
+            .flatten()
+            .all(|task| std::fs::read_to_string(task.path().join("stat")).is_ok_and(stopped))
+        {
+            assert!(started.elapsed() < Duration::from_secs(5), "the server did not stop within 5 s");
+            std::thread::sleep(Duration::from_millis(1));
+        }
     }
 
     /// Sends SIGCONT after [`TestServer::freeze`].

@@ -13,6 +13,7 @@ import time
 from collections import Counter
 from collections.abc import Callable, Iterator
 from dataclasses import dataclass, field
+from pathlib import Path
 
 import pytest
 
@@ -318,11 +319,21 @@ async def test_async_a_replica_that_never_answers_is_passed_over_by_calls_and_st
             assert time.monotonic() - started >= 1.0
 
 
+def all_threads_stopped(pid: int) -> bool:
+    """True when every thread of process ``pid`` is stopped (state T): a stop is delivered, not immediate."""
+    tasks = Path(f"/proc/{pid}/task")
+    return all((task / "stat").read_text().rsplit(")", 1)[1].split()[0] == "T" for task in tasks.iterdir())
+
+
 @contextlib.contextmanager
 def frozen(server: Server) -> Iterator[None]:
     """The server stopped (SIGSTOP): it keeps its connections and answers nothing, until thawed."""
     assert server.process is not None
     server.process.send_signal(signal.SIGSTOP)
+    end = time.monotonic() + 5
+    while not all_threads_stopped(server.process.pid):
+        assert time.monotonic() < end, "the server did not stop within 5 s"
+        time.sleep(0.001)
     try:
         yield
     finally:
