@@ -13,10 +13,10 @@ on the client's next replica (each other replica tried once, the lost one last),
 and the unanswered ticks again, and carries on: the robot sees every tick answered exactly once, in order.
 A replica lost while no tick was waiting is noticed at the next ``send``, which reopens first.
 A replica that does not answer an open, or leaves a tick unanswered, within the client's ``timeout`` (one
-that takes the connection and says nothing, as a frozen server does) is passed over as gone. ``endpoint`` is the replica serving the
-stream now, ``reopened`` how often it moved and ``resent`` how many ticks were sent again. When no replica
-takes the stream, :class:`~fastrack.Unavailable` says what ended it; the ticks still waiting are dropped,
-and the next ``send`` tries the replicas again.
+that takes the connection and says nothing, as a frozen server does) is passed over as gone. ``endpoint``
+is the replica serving the stream now, ``reopened`` how often it moved and ``resent`` how many ticks were
+sent again. When no replica takes the stream, :class:`~fastrack.Unavailable` says what ended it; the ticks
+still waiting are dropped, and the next ``send`` tries the replicas again.
 
 Nothing else needs carrying over: a reply depends on its tick alone, and the bound in force (``beta_old``)
 is the robot's own online loop's.
