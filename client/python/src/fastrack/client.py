@@ -28,8 +28,9 @@ class Client(Connection[grpc.Channel]):
     them separated by commas, or a host name resolving to several addresses (e.g. a Kubernetes headless
     Service): each address is a replica, and calls go round-robin over them (see :mod:`fastrack.replicas`).
     ``timeout`` is the default deadline of unary calls in seconds (each method takes its own ``timeout``
-    too), and how long a replica may take to open a ``Track`` stream or answer a tick; ``token`` is sent as ``authorization: Bearer <token>``; ``retry`` says how idempotent unary calls
-    are retried on ``UNAVAILABLE`` (never ``Track`` nor the admin calls); ``max_reconnect_backoff`` is the
+    too), and how long a replica may take to open a ``Track`` stream or answer a tick; ``token`` is sent as
+    ``authorization: Bearer <token>``; ``retry`` says how idempotent unary calls are retried on
+    ``UNAVAILABLE`` (never ``Track`` nor the admin calls); ``max_reconnect_backoff`` is the
     longest wait between reconnection attempts to a lost replica, seconds. Use as a context manager, or call
     :meth:`close`. Models are named by ``model`` (e.g. ``"dubins4d"``) and ``version`` (0: the server's
     default version).
