@@ -70,36 +70,14 @@ impl Tracker {
         self.space.tracking_error(&self.relative_state(s, p))
     }
 
-    /// A state at `position` moving at `speed` along `heading` in the ground plane (0 along +y, pi/2 along
-    /// +x), the rest zero: a system with a heading `theta` and a speed `v` (dubins4d) takes them; one with
-    /// velocities `v_x`, `v_y` (quad10d) takes the velocity's components.
+    /// A state at `position` on the planner, moving at `speed` along `heading` in the ground plane (0 along
+    /// +y, pi/2 along +x), the rest zero: the system's start state ([`AffineSystem::start_state`]) moved to
+    /// `position`.
     pub fn initial_state(&self, position: &[f64], heading: f64, speed: f64) -> Result<Vec<f64>, String> {
-        let has = |name: &str| self.system.state.iter().any(|d| d.name == name);
-        if has("theta") && has("v") {
-            self.state_at(position, &[("theta", heading), ("v", speed)])
-        } else if has("v_x") && has("v_y") {
-            self.state_at(position, &[("v_x", speed * heading.sin()), ("v_y", speed * heading.cos())])
-        } else {
-            Err(format!(
-                "system {} has neither a heading and speed nor ground velocities to start with",
-                self.system.id
-            ))
-        }
-    }
-
-    /// A state at `position` with the named coordinates set, the rest zero.
-    fn state_at(&self, position: &[f64], named: &[(&str, f64)]) -> Result<Vec<f64>, String> {
         let q = &self.space.planner_to_state;
-        let mut s: Vec<f64> =
-            (0..self.system.n_state()).map(|i| (0..position.len()).map(|j| q[(i, j)] * position[j]).sum()).collect();
-        for (name, value) in named {
-            let i = self
-                .system
-                .state
-                .iter()
-                .position(|d| d.name == *name)
-                .ok_or_else(|| format!("system {} has no state coordinate {name}", self.system.id))?;
-            s[i] = *value;
+        let mut s = self.system.start_state(heading, speed)?;
+        for (i, x) in s.iter_mut().enumerate() {
+            *x += (0..position.len()).map(|j| q[(i, j)] * position[j]).sum::<f64>();
         }
         Ok(s)
     }

@@ -104,6 +104,9 @@ pub fn export(root: &Path, request: ExportRequest<'_>) -> anyhow::Result<PathBuf
     for (beta, measured, raised) in &report.non_monotone {
         tracing::warn!(beta, measured, raised_to = raised, "learned V_min not monotone in beta; level raised");
     }
+    for (beta, level, at_rest) in &report.raised_to_rest {
+        tracing::info!(beta, level, raised_to = at_rest, "level raised to hold the resting state");
+    }
     let (state, planner_to_state, params, controls) = Manifest::describe_system(system);
     let manifest = Manifest {
         schema_version: SCHEMA_VERSION,

@@ -75,6 +75,9 @@ pub struct TebReport {
     pub rows: Vec<TebRow>,
     /// `(beta, measured minimum, level raised to)` where a row's minimum fell below an earlier row's.
     pub non_monotone: Vec<(f64, f64, f64)>,
+    /// `(beta, level before, value at rest)` where the system's resting state
+    /// ([`AffineSystem::resting_state`]) lay above the row's level and the level was raised to hold it.
+    pub raised_to_rest: Vec<(f64, f64, f64)>,
 }
 
 fn uniform_states(system: &AffineSystem, n: usize, rng: &mut impl Rng) -> Vec<f64> {
@@ -273,7 +276,9 @@ pub fn nested_shares(
     Ok(shares)
 }
 
-/// Builds the TEB table of `oracle` for `system` (every parameter set to the row's `beta`).
+/// Builds the TEB table of `oracle` for `system` (every parameter set to the row's `beta`). A row's level is
+/// the largest learned minimum up to its `beta` (levels never fall as `beta` grows), raised where needed so
+/// that the set holds the system's resting state: a hovering robot must start inside every row's set.
 pub fn teb_table(oracle: &dyn ValueOracle, system: &AffineSystem, options: &TebOptions) -> Result<TebReport, String> {
     if options.rows < MIN_TEB_ROWS {
         return Err(format!("a TEB table needs at least {MIN_TEB_ROWS} rows, asked for {}", options.rows));
@@ -283,7 +288,10 @@ pub fn teb_table(oracle: &dyn ValueOracle, system: &AffineSystem, options: &TebO
     let mut rng = rand::rngs::StdRng::seed_from_u64(options.seed);
     let mut rows = Vec::with_capacity(options.rows);
     let mut non_monotone = Vec::new();
+    let mut raised_to_rest = Vec::new();
+    let rest = system.resting_state();
     let mut running_max = f64::NEG_INFINITY;
+    let mut previous_level = f64::NEG_INFINITY;
     for i in 0..options.rows {
         let beta = if i + 1 == options.rows {
             beta_u
@@ -304,7 +312,15 @@ pub fn teb_table(oracle: &dyn ValueOracle, system: &AffineSystem, options: &TebO
             non_monotone.push((beta, measured_min, running_max));
         }
         running_max = running_max.max(measured_min);
-        let level = running_max;
+        let mut level = running_max.max(previous_level);
+        if let Some(rest) = &rest {
+            let (at_rest, _) = oracle.values_and_grads(rest, &params)?;
+            if at_rest[0] > level {
+                raised_to_rest.push((beta, level, at_rest[0]));
+                level = at_rest[0];
+            }
+        }
+        previous_level = level;
         let (extent, boundary_radii) = error_set_shape(oracle, system, &params, level, options, &mut rng)?;
         rows.push(TebRow {
             beta,
@@ -317,5 +333,5 @@ pub fn teb_table(oracle: &dyn ValueOracle, system: &AffineSystem, options: &TebO
             reference: None,
         });
     }
-    Ok(TebReport { rows, non_monotone })
+    Ok(TebReport { rows, non_monotone, raised_to_rest })
 }

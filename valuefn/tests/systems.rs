@@ -399,3 +399,31 @@ fn the_resting_control_holds_a_quadcopter_and_leaves_a_car_coasting() {
     let car = dubins4d::system();
     assert_eq!(car.resting_control(&[1.0, 2.0, 0.7, 1.5]), vec![0.0, 0.0]);
 }
+
+#[test]
+fn a_robot_starts_on_its_planner_with_its_heading_and_speed_where_its_system_keeps_them() {
+    let right = std::f64::consts::FRAC_PI_2;
+    // A car keeps them as they are (the heading wrapped into its period).
+    let car = dubins4d::system();
+    assert_eq!(car.start_state(right, 0.5).unwrap(), vec![0.0, 0.0, right, 0.5]);
+    let wrapped = car.start_state(right + std::f64::consts::TAU, 0.5).unwrap();
+    assert!((wrapped[2] - right).abs() < 1e-12, "{wrapped:?}");
+    assert_eq!(car.resting_state(), None, "a car at rest still has a heading");
+    // A quadcopter keeps its velocity's components (heading pi/2 is along +x), level and vertically still.
+    let quad = quad10d::system();
+    let moving = quad.start_state(right, 2.0).unwrap();
+    for (i, x) in moving.iter().enumerate() {
+        let expected = if i == 1 { 2.0 } else { 0.0 };
+        assert!((x - expected).abs() < 1e-12, "coordinate {i}: {moving:?}");
+    }
+    let along_y = quad.start_state(0.0, 1.0).unwrap();
+    assert_eq!((along_y[1], along_y[5]), (0.0, 1.0));
+    assert_eq!(quad.resting_state(), Some(vec![0.0; 10]));
+    assert_eq!(quad.start_state(1.0, 0.0).unwrap(), vec![0.0; 10], "at rest the heading does not show");
+    // A single axis has nowhere to put them, and its subsystems say so.
+    let err = double_integrator::system().start_state(0.0, 1.0).unwrap_err();
+    assert!(err.contains("no motion over the ground"), "{err}");
+    assert!(quad10d::x_axis().start_state(0.0, 1.0).is_err() && quad10d::x_axis().resting_state().is_none());
+    let planar = quad.subsystem("horizontal", "both horizontal axes", &[0, 1, 2, 3, 4, 5, 6, 7]).unwrap();
+    assert_eq!(planar.start_state(right, 2.0).unwrap()[1], 2.0);
+}

@@ -1,8 +1,9 @@
 //! The TEB table refuses a value function with a negative minimum, saying where it is: no tracking value
 //! function has one (`V >= l >= 0`), and the state tells the model's author which region was not learned.
+//! Its levels hold the resting state of a system that has one, and the sets' overlap is measured.
 
 use fastrack_valuefn::manifest::TebRow;
-use fastrack_valuefn::system::double_integrator;
+use fastrack_valuefn::system::{double_integrator, quad10d};
 use fastrack_valuefn::teb::{nested_shares, teb_table, TebOptions, ValueOracle};
 use rand::SeedableRng;
 
@@ -76,4 +77,34 @@ fn nested_shares_are_the_overlap_of_each_set_with_the_next_ones() {
     assert!((first - 0.75).abs() < 0.04, "overlap share {first}, expected 0.75");
     assert_eq!(shares[1], Some(1.0));
     assert_eq!(shares[2], None);
+}
+
+/// `V(r; beta) = beta (1 + |r - c|^2)` with `c` = 0.3 m of x error: least (`beta`) off the resting state,
+/// `1.09 beta` at rest.
+struct OffRest;
+
+impl ValueOracle for OffRest {
+    fn values_and_grads(&self, states: &[f64], params: &[f64]) -> Result<(Vec<f64>, Vec<f64>), String> {
+        let (mut values, mut grads) = (Vec::new(), Vec::new());
+        for (r, p) in states.chunks(10).zip(params.chunks(3)) {
+            let d: Vec<f64> = r.iter().enumerate().map(|(i, x)| if i == 0 { x - 0.3 } else { *x }).collect();
+            values.push(p[0] * (1.0 + d.iter().map(|x| x * x).sum::<f64>()));
+            grads.extend(d.iter().map(|x| 2.0 * p[0] * x));
+        }
+        Ok((values, grads))
+    }
+}
+
+#[test]
+fn every_level_holds_the_hovering_state() {
+    let options = TebOptions { boundary_directions: 8, boundary_samples: 16, ..TebOptions::default() };
+    let report = teb_table(&OffRest, &quad10d::system(), &options).unwrap();
+    assert_eq!(report.raised_to_rest.len(), report.rows.len(), "{:?}", report.raised_to_rest);
+    for (row, &(beta, before, at_rest)) in report.rows.iter().zip(&report.raised_to_rest) {
+        assert_eq!(beta, row.beta);
+        // The learned minimum (at least beta) stays as measured; the level is V at rest.
+        assert!(row.measured_min >= row.beta && row.measured_min < at_rest, "{row:?}");
+        assert!(before < at_rest && (at_rest - 1.09 * row.beta).abs() < 1e-12, "{before} {at_rest}");
+        assert_eq!(row.level, at_rest);
+    }
 }

@@ -8,7 +8,7 @@
 //! so `a = 1` keeps the training horizon short.
 
 use super::drift::{term, Factor};
-use super::{AffineSystem, Drift, InputDim, ParamDim, StateDim};
+use super::{AffineSystem, Drift, GroundMotion, InputDim, ParamDim, StateDim};
 use nalgebra::DMatrix;
 
 /// System id.
@@ -42,5 +42,6 @@ pub fn system() -> AffineSystem {
         g_planner: DMatrix::from_column_slice(2, 1, &[-1.0, 0.0]),
         g_disturbance: DMatrix::zeros(2, 0),
         planner_to_state: DMatrix::from_column_slice(2, 1, &[1.0, 0.0]),
+        ground_motion: GroundMotion::None,
     }
 }

@@ -5,7 +5,7 @@
 //! `beta_1, beta_2 in [0.5, 1.25]`.
 
 use super::drift::{term, Factor};
-use super::{AffineSystem, Drift, InputDim, ParamDim, StateDim};
+use super::{AffineSystem, Drift, GroundMotion, InputDim, ParamDim, StateDim};
 use nalgebra::DMatrix;
 use std::f64::consts::PI;
 
@@ -71,5 +71,6 @@ pub fn system() -> AffineSystem {
         g_planner,
         g_disturbance: DMatrix::zeros(4, 0),
         planner_to_state,
+        ground_motion: GroundMotion::HeadingAndSpeed { heading: 2, speed: 3 },
     }
 }

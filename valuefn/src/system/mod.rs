@@ -64,6 +64,28 @@ pub struct ParamDim {
     pub max: f64,
 }
 
+/// Where the tracker's motion over the ground (the planner's first two axes) sits in its state: what a
+/// robot that starts on its planner at a heading and a speed sets.
+#[derive(Debug, Clone, Copy, PartialEq, Eq)]
+pub enum GroundMotion {
+    /// A heading angle (0 along +y, pi/2 along +x) and a speed: a car, which has a heading even at rest.
+    HeadingAndSpeed {
+        /// Index of the heading coordinate.
+        heading: usize,
+        /// Index of the speed coordinate.
+        speed: usize,
+    },
+    /// Velocity components along x and y: a vehicle that hovers, at rest in the zero state.
+    Velocity {
+        /// Index of the x velocity.
+        x: usize,
+        /// Index of the y velocity.
+        y: usize,
+    },
+    /// The state holds no motion over the ground (a single axis).
+    None,
+}
+
 /// A relative tracker/planner system of the control- and planner-affine shape.
 #[derive(Debug, Clone)]
 pub struct AffineSystem {
@@ -93,6 +115,8 @@ pub struct AffineSystem {
     pub g_disturbance: DMatrix<f64>,
     /// `Q`, `n_state x n_planner_state`: `r = s - Q p`.
     pub planner_to_state: DMatrix<f64>,
+    /// Where the tracker's motion over the ground sits in the state.
+    pub ground_motion: GroundMotion,
 }
 
 impl AffineSystem {
@@ -114,6 +138,35 @@ impl AffineSystem {
     /// Number of planner state coordinates (columns of `Q`).
     pub fn planner_dim(&self) -> usize {
         self.planner_to_state.ncols()
+    }
+
+    /// The relative state of a tracker on its planner (zero position error) moving at `speed` along
+    /// `heading` over the ground (0 along +y, pi/2 along +x), every other coordinate zero: where a robot
+    /// starts. Errors when the system's state holds no ground motion.
+    pub fn start_state(&self, heading: f64, speed: f64) -> Result<Vec<f64>, String> {
+        let mut r = vec![0.0; self.n_state()];
+        match self.ground_motion {
+            GroundMotion::HeadingAndSpeed { heading: h, speed: v } => {
+                r[h] = heading;
+                r[v] = speed;
+                self.wrap(&mut r);
+            }
+            GroundMotion::Velocity { x, y } => {
+                r[x] = speed * heading.sin();
+                r[y] = speed * heading.cos();
+            }
+            GroundMotion::None => {
+                return Err(format!("system {} holds no motion over the ground to start with", self.id));
+            }
+        }
+        Ok(r)
+    }
+
+    /// The relative state in which the tracker rests on its planner whatever its heading: the zero state of
+    /// a system whose ground motion is a velocity (a hovering quadcopter). `None` for a car, whose state at
+    /// rest still holds its heading (and its value depends on it), and for a system without ground motion.
+    pub fn resting_state(&self) -> Option<Vec<f64>> {
+        matches!(self.ground_motion, GroundMotion::Velocity { .. }).then(|| vec![0.0; self.n_state()])
     }
 
     /// The tracker's control box.
@@ -232,6 +285,17 @@ impl AffineSystem {
             g_planner: pick(&self.g_planner, &planner_inputs),
             g_disturbance: pick(&self.g_disturbance, &disturbances),
             planner_to_state: pick(&self.planner_to_state, &planner_dims),
+            ground_motion: match self.ground_motion {
+                GroundMotion::HeadingAndSpeed { heading, speed } => match (new_index(heading), new_index(speed)) {
+                    (Some(heading), Some(speed)) => GroundMotion::HeadingAndSpeed { heading, speed },
+                    _ => GroundMotion::None,
+                },
+                GroundMotion::Velocity { x, y } => match (new_index(x), new_index(y)) {
+                    (Some(x), Some(y)) => GroundMotion::Velocity { x, y },
+                    _ => GroundMotion::None,
+                },
+                GroundMotion::None => GroundMotion::None,
+            },
         })
     }
 

@@ -26,7 +26,7 @@
 //! cannot hold.
 
 use super::drift::{term, Factor};
-use super::{AffineSystem, DecomposedAxis, Drift, InputDim, ParamDim, StateDim};
+use super::{AffineSystem, DecomposedAxis, Drift, GroundMotion, InputDim, ParamDim, StateDim};
 use nalgebra::DMatrix;
 use std::f64::consts::PI;
 
@@ -142,6 +142,7 @@ pub fn system() -> AffineSystem {
         g_planner,
         g_disturbance: DMatrix::zeros(10, 0),
         planner_to_state,
+        ground_motion: GroundMotion::Velocity { x: 1, y: 5 },
     }
 }
 
