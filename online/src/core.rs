@@ -11,7 +11,7 @@
 //! changes only when the report is returned. A driver answers over the network (`online_loop::OnlineLoop`,
 //! over a `Track` stream) or in process.
 
-use crate::geometry::{clearance, inside, norm, remember, sub, Obstacle, Point};
+use crate::geometry::{clearance, inside, lerp, norm, remember, sub, Obstacle, Point};
 use crate::raw_path::{advance_along, PlanError, PlanRequest, RawPathPlanner};
 use fastrack_proto::planner_speed::{planner_rule, query_planner_control, row_for, PlannerSpeed, SpeedRow, SpeedRule};
 use serde::{Deserialize, Serialize};
@@ -402,10 +402,9 @@ impl<O: Obstacle<D>, const D: usize> LoopCore<O, D> {
         let planner_clearance = match self.settings.rule {
             // Less the farthest a period's move takes the planner (`beta_u dt` on every axis), so that the move
             // keeps the bound clear.
-            SpeedRule::Planner => (!self.obstacles.is_empty()).then(|| {
-                let reach = (D as f64).sqrt() * self.beta_u() * self.settings.control_period;
-                (clearance(&self.obstacles, self.planner) - reach).max(0.0)
-            }),
+            SpeedRule::Planner => {
+                (!self.obstacles.is_empty()).then(|| (clearance(&self.obstacles, self.planner) - self.reach()).max(0.0))
+            }
             SpeedRule::HalfDistance => None,
         };
         let speed = match planner_clearance {
@@ -478,6 +477,12 @@ impl<O: Obstacle<D>, const D: usize> LoopCore<O, D> {
                 step.round_trips = 0;
                 return if speed.beta > beta_old { self.steady(step) } else { self.hold(step) };
             }
+            if speed.beta > beta_old && !self.path_allows(speed) {
+                // The path ahead would take the faster row away again within its bound: a rise refused, the
+                // planner moves at beta_old.
+                step.round_trips = 0;
+                return self.steady(step);
+            }
             step.stage = Stage::Advance { p_next, ahead, rising: speed.beta > beta_old };
             p_next
         };
@@ -526,6 +531,36 @@ impl<O: Obstacle<D>, const D: usize> LoopCore<O, D> {
     /// planner at `p` touches none of them.
     fn clears(&self, p: Point<D>, bound: f64) -> bool {
         clearance(&self.obstacles, p) > bound
+    }
+
+    /// Whether a rise to `speed` may be taken as far as the path ahead goes: under the planner rule, the raw
+    /// path within that row's bound ahead of the planner must keep the bound clear by one period's reach, as
+    /// the rule asks of the planner's own state (so a rise is not undone a bound's length later); under the
+    /// paper's rule, always.
+    fn path_allows(&self, speed: PlannerSpeed) -> bool {
+        self.settings.rule != SpeedRule::Planner
+            || self.path_clearance(speed.dteb_radius) - self.reach() > speed.dteb_radius
+    }
+
+    /// The farthest one control period can move the planner: `beta_u dt` on every axis.
+    fn reach(&self) -> f64 {
+        (D as f64).sqrt() * self.beta_u() * self.settings.control_period
+    }
+
+    /// The least clearance of the planner's state and its raw path within `ahead` metres along it.
+    fn path_clearance(&self, ahead: f64) -> f64 {
+        let mut least = clearance(&self.obstacles, self.planner);
+        let (mut from, mut left) = (self.planner, ahead);
+        for &to in &self.raw_path {
+            if left <= 0.0 {
+                break;
+            }
+            let length = norm(sub(to, from));
+            let end = if length > left { lerp(from, to, left / length) } else { to };
+            least = self.obstacles.iter().map(|o| o.segment_distance(from, end)).fold(least, f64::min);
+            (from, left) = (to, left - length);
+        }
+        least
     }
 
     /// The table's fastest `beta`.
@@ -877,6 +912,31 @@ mod tests {
         let (next, _) = run(&mut core, &[-3.0, 0.0, 0.0, 0.0], &[OBSTACLE], true, true);
         assert_eq!((next.branch, next.beta_query), (Branch::Advance, 1.0));
         assert!(clearance(core.obstacles(), next.planner) > 1.0 && next.planner[0] > drop.planner[0]);
+    }
+
+    #[test]
+    fn under_the_planner_rule_a_rise_the_path_ahead_would_undo_moves_at_beta_old() {
+        // beta 0.5 in force, the planner at the origin on a straight path along +x. An obstacle 2.27 m from
+        // the planner (less the reach 0.21 m: beta_u's bound 1.5 fits) but 1.06 m from the path's point 1.5 m
+        // ahead, within beta_u's bound: the rise is refused, the planner moves at 0.5 under its row.
+        let near = PlaneObstacle::Circle { center: [2.5, 1.2], radius: 0.5 };
+        let mut slow = core();
+        (slow.settings.rule, slow.beta_query) = (SpeedRule::Planner, 0.5);
+        let (report, asked) = run(&mut slow, &[0.0; 4], std::slice::from_ref(&near), true, true);
+        assert_eq!((report.branch, report.beta_query, report.round_trips), (Branch::Steady, 0.5, 1));
+        assert!(matches!(asked[..], [Query::Batch { beta: 0.5, .. }]), "{asked:?}");
+        assert!((report.planner[0] - 0.05).abs() < 1e-12, "{:?}", report.planner);
+        // One metre farther along, the path within 1.5 m keeps 1.62 m (less the reach) from it: the rise is taken.
+        let far = PlaneObstacle::Circle { center: [3.5, 1.2], radius: 0.5 };
+        let mut slow = core();
+        (slow.settings.rule, slow.beta_query) = (SpeedRule::Planner, 0.5);
+        let (report, _) = run(&mut slow, &[0.0; 4], &[far], true, true);
+        assert_eq!((report.branch, report.beta_query), (Branch::Advance, 1.5));
+        // The paper's rule reads the tracker's distance and takes the rise past the near obstacle.
+        let mut slow = core();
+        slow.beta_query = 0.5;
+        let (report, _) = run(&mut slow, &[0.0; 4], std::slice::from_ref(&near), true, true);
+        assert_eq!((report.branch, report.beta_query), (Branch::Advance, 1.0));
     }
 
     #[test]

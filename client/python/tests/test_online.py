@@ -293,6 +293,35 @@ def test_the_planner_rule_picks_beta_by_the_planners_own_clearance(client: fastr
         online(client, rule="fastest")  # type: ignore[arg-type]
 
 
+def test_the_planner_rule_takes_a_rise_only_where_the_path_ahead_keeps_the_faster_bound_clear(
+    client: fastrack.Client,
+) -> None:
+    for ahead, rises in [(0.5, False), (1.5, True)]:
+        with online(client, rule="planner", planner=StraightLine()) as loop:
+            slow, fast = loop.speeds[0], loop.speeds[-1]
+            reach = math.sqrt(2.0) * fast.beta * 0.1
+            # beta_l in force, the planner at the origin on a straight path along +x; an obstacle beside the
+            # path, its nearest point to the path `ahead` m beyond beta_u's bound: 0.2 m too close for beta_u
+            # from the path's point at that bound when ahead = 0.5, clear of it when ahead = 1.5.
+            loop._beta_query = slow.beta
+            side = math.sqrt((fast.bound + reach + 0.5 - 0.2) ** 2 - 0.5**2)
+            obstacle = Circle((fast.bound + ahead, side), 0.5)
+            own = clearance([obstacle], (0.0, 0.0)) - reach
+            assert planner_rule(loop.speeds, own).beta == fast.beta, "the planner's own clearance allows beta_u"
+            # A tracker speed at which beta_u's certified set holds the state after the move, so that only the
+            # path can refuse the rise.
+            moved = [[-fast.beta * 0.1, 0.0, ALONG_X, v] for v in np.linspace(0.1, 2.9, 29)]
+            held = client.evaluate(MODEL, moved, fast.beta, out_of_domain="flag").in_teb
+            speed = moved[int(np.argmax(held))][3]
+            assert held.any(), "beta_u's set holds no tracker on its planner"
+            step = loop.step([0.0, 0.0, ALONG_X, speed], [obstacle])
+            if rises:
+                assert step.branch == "advance" and step.beta_query == fast.beta, step
+            else:
+                assert step.branch == "steady" and step.beta_query == step.beta_old == slow.beta, step
+                np.testing.assert_allclose(step.planner, [slow.beta * 0.1, 0.0], rtol=0, atol=1e-12)
+
+
 def test_a_drop_in_beta_far_from_the_plan_resets_the_planner_inside_the_bound(client: fastrack.Client) -> None:
     with online(client) as loop:
         loop.step([0.0, 0.0, ALONG_X, 1.0])

@@ -19,7 +19,8 @@ Each :meth:`OnlineLoop.step` takes the tracker state and the obstacles sensed no
    in force, and the drop is tried again at the next step (branch ``"hold"``); otherwise moves the planner
    along the raw path for one control period, each axis at most ``beta_query dt`` (branch ``"advance"``),
    except on a rise whose new relative state the faster row's certified set does not hold: then it moves at
-   ``beta_old``, whose row stays in force (branch ``"steady"``); and when the relative state has stayed outside
+   ``beta_old``, whose row stays in force (branch ``"steady"``), as it does under the planner rule on a rise
+   whose path ahead, within the faster row's bound, does not keep that bound clear; and when the relative state has stayed outside
    the certified set of the row in force for half the verification horizon, the planner is reset into it
    under that row, a rise waiting for the next step (or holds). Every planner state a step ends with lies
    farther than the bound then in force from every sensed obstacle: a keep, a reset point or a move that
@@ -211,7 +212,8 @@ def planner_rule(rows: Sequence[SpeedRow], planner_clearance: float) -> PlannerS
 SpeedRule = Literal["half-distance", "planner"]
 """The rule that picks ``beta_query``: ``"half-distance"`` (the paper's queryPlannerControl on the tracker's
 distance to the nearest sensed obstacle) or ``"planner"`` (:func:`planner_rule` on the planner's own clearance,
-less one control period's reach at ``beta_u``)."""
+less one control period's reach at ``beta_u``; a rise is taken only where the raw path within the faster row's
+bound ahead keeps that bound clear as well)."""
 
 
 REANCHOR_SHARE = 0.5
@@ -735,6 +737,10 @@ class OnlineLoop:
                 if speed.beta > beta_old:
                     return self._steady(tracker, d_obs, beta_old, speed, replanned, 0)
                 return self._hold(tracker, d_obs, beta_old, speed, replanned, 0)
+            if speed.beta > beta_old and not self._path_allows(speed):
+                # The path ahead would take the faster row away again within its bound: a rise refused, the
+                # planner moves at beta_old.
+                return self._steady(tracker, d_obs, beta_old, speed, replanned, 0)
             round_trips += 1
             reply = self._tick(tracker, p_next, d_obs, planner_clearance, speed.beta)
             if speed.beta > beta_old and not reply.in_teb:
@@ -959,8 +965,31 @@ class OnlineLoop:
         one control period can move it (None: the paper's rule, or nothing sensed)."""
         if self.rule != "planner" or not self._obstacles:
             return None
-        reach = math.sqrt(2.0) * self._speeds[-1].beta * self.control_period
-        return max(clearance(self._obstacles, self._planner_state) - reach, 0.0)
+        return max(clearance(self._obstacles, self._planner_state) - self._reach(), 0.0)
+
+    def _reach(self) -> float:
+        """The farthest one control period can move the planner: ``beta_u dt`` on each axis."""
+        return math.sqrt(2.0) * self._speeds[-1].beta * self.control_period
+
+    def _path_allows(self, speed: PlannerSpeed) -> bool:
+        """Whether a rise to ``speed`` may be taken as far as the path ahead goes: under the planner rule, the raw
+        path within that row's bound ahead of the planner must keep the bound clear by one period's reach, as
+        the rule asks of the planner's own state; under the paper's rule, always."""
+        return self.rule != "planner" or self._path_clearance(speed.dteb_radius) - self._reach() > speed.dteb_radius
+
+    def _path_clearance(self, ahead: float) -> float:
+        """The least clearance of the planner's state and its raw path within ``ahead`` metres along it."""
+        least = clearance(self._obstacles, self._planner_state)
+        start, left = self._planner_state, ahead
+        for to in self._raw_path:
+            if left <= 0.0:
+                break
+            length = norm(sub(to, start))
+            t = min(left / length, 1.0) if length > 0.0 else 1.0
+            end = (start[0] + t * (to[0] - start[0]), start[1] + t * (to[1] - start[1]))
+            least = min([least, *(o.segment_distance(start, end) for o in self._obstacles)])
+            start, left = to, left - length
+        return least
 
     def _tick(
         self, tracker: list[float], p: Point, d_obs: float | None, planner_clearance: float | None, beta: float
