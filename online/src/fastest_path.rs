@@ -15,8 +15,8 @@
 use crate::geometry::{chebyshev_norm, clearance, lerp, segment_is_free, sub, Obstacle, Point};
 use crate::raw_path::{Cell, CellGrid, PlanError, PlanRequest, RawPathPlanner};
 use fastrack_proto::planner_speed::{SpeedRow, SpeedRule};
+use rustc_hash::FxHashMap;
 use std::cell::RefCell;
-use std::collections::HashMap;
 
 /// A* on a grid of the workspace whose step cost is the step's duration at the speed the rule allows there;
 /// needs the request's TEB table ([`PlanRequest::speeds`]).
@@ -48,10 +48,12 @@ impl<O: Obstacle<D>, const D: usize> RawPathPlanner<O, D> for FastestPath {
             rule: request.rule,
             known: RefCell::default(),
         };
-        let seconds = |a: Point<D>, b: Point<D>| chebyshev(a, b) / speed.at(a).min(speed.at(b));
+        let cell_speed = |c: Cell<D>| speed.at_clearance(grid.cell_clearance(c));
+        let seconds =
+            |a: Cell<D>, b: Cell<D>| chebyshev(grid.centre(a), grid.centre(b)) / cell_speed(a).min(cell_speed(b));
         let goal = grid.cell_of(request.goal);
         let points = grid.search(
-            |a: Cell<D>, b: Cell<D>| (seconds(grid.centre(a), grid.centre(b)) * TIME_SCALE) as u64,
+            |a: Cell<D>, b: Cell<D>| (seconds(a, b) * TIME_SCALE) as u64,
             |a: Cell<D>| (chebyshev(grid.centre(a), grid.centre(goal)) / beta_u * TIME_SCALE) as u64,
         )?;
         Ok(shortcut_in_time(&points, request, |a, b| segment_seconds(a, b, self.cell, &speed)))
@@ -63,16 +65,22 @@ struct SpeedMap<'a, O, const D: usize> {
     obstacles: &'a [O],
     speeds: &'a [SpeedRow],
     rule: SpeedRule,
-    known: RefCell<HashMap<[u64; D], f64>>,
+    known: RefCell<FxHashMap<[u64; D], f64>>,
 }
 
 impl<O: Obstacle<D>, const D: usize> SpeedMap<'_, O, D> {
     /// The rule's `beta` at the point's clearance.
     fn at(&self, p: Point<D>) -> f64 {
-        *self.known.borrow_mut().entry(p.map(f64::to_bits)).or_insert_with(|| {
-            let gap = (!self.obstacles.is_empty()).then(|| clearance(self.obstacles, p));
-            self.rule.at_clearance(self.speeds, gap).beta
-        })
+        *self
+            .known
+            .borrow_mut()
+            .entry(p.map(f64::to_bits))
+            .or_insert_with(|| self.at_clearance(clearance(self.obstacles, p)))
+    }
+
+    /// The rule's `beta` at a point `gap` from the nearest obstacle (any, with none sensed: the fastest).
+    fn at_clearance(&self, gap: f64) -> f64 {
+        self.rule.at_clearance(self.speeds, (!self.obstacles.is_empty()).then_some(gap)).beta
     }
 }
 

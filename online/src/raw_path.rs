@@ -4,6 +4,7 @@
 
 use crate::geometry::{chebyshev_norm, clearance, inside, lerp, norm, segment_is_free, sub, Obstacle, Point};
 use fastrack_proto::planner_speed::{SpeedRow, SpeedRule};
+use std::cell::RefCell;
 use std::collections::VecDeque;
 
 /// What a planner is asked for.
@@ -101,7 +102,15 @@ pub(crate) struct CellGrid<'r, O, const D: usize> {
     counts: [i64; D],
     /// The offsets to the cells a cell touches.
     neighbours: Vec<[i64; D]>,
+    /// The goal's cell.
+    goal: Cell<D>,
+    /// The clearance of each cell's centre met so far (NaN: not yet measured), when the grid holds at most
+    /// [`MAX_REMEMBERED_CELLS`]: a search asks about every cell from each of its neighbours.
+    clearances: Option<RefCell<Vec<f64>>>,
 }
+
+/// Most cells whose clearances a grid remembers (32 MiB of them); a larger grid measures each time.
+const MAX_REMEMBERED_CELLS: i64 = 1 << 22;
 
 impl<'r, O: Obstacle<D>, const D: usize> CellGrid<'r, O, D> {
     /// The grid of `request` with cells of `cell` metres, after checking the settings and the goal.
@@ -121,7 +130,17 @@ impl<'r, O: Obstacle<D>, const D: usize> CellGrid<'r, O, D> {
             .map(|k| std::array::from_fn(|axis| (k / 3i64.pow((D - 1 - axis) as u32)) % 3 - 1))
             .filter(|offset: &[i64; D]| offset.iter().any(|&o| o != 0))
             .collect();
-        let grid = Self { request, cell, counts: std::array::from_fn(|axis| span(axis) as i64 + 1), neighbours };
+        let counts: [i64; D] = std::array::from_fn(|axis| span(axis) as i64 + 1);
+        let total = counts.iter().try_fold(1i64, |total, &n| total.checked_mul(n)).unwrap_or(i64::MAX);
+        let mut grid = Self {
+            request,
+            cell,
+            counts,
+            neighbours,
+            goal: [0; D],
+            clearances: (total <= MAX_REMEMBERED_CELLS).then(|| RefCell::new(vec![f64::NAN; total as usize])),
+        };
+        grid.goal = grid.cell_of(request.goal);
         if !grid.free(request.goal) {
             return Err(PlanError::GoalBlocked { goal: request.goal.to_vec(), inflation: request.inflation });
         }
@@ -150,6 +169,35 @@ impl<'r, O: Obstacle<D>, const D: usize> CellGrid<'r, O, D> {
         self.inside(p) && clearance(self.request.obstacles, p) > self.request.inflation
     }
 
+    /// The distance from the cell's centre to the nearest obstacle, measured once for a cell of the grid.
+    pub(crate) fn cell_clearance(&self, c: Cell<D>) -> f64 {
+        let measure = || clearance(self.request.obstacles, self.centre(c));
+        let on_grid = (0..D).all(|axis| c[axis] >= 0 && c[axis] < self.counts[axis]);
+        let Some(known) = self.clearances.as_ref().filter(|_| on_grid) else {
+            return measure();
+        };
+        let index = (0..D).fold(0, |index, axis| index * self.counts[axis] + c[axis]) as usize;
+        let mut known = known.borrow_mut();
+        if known[index].is_nan() {
+            known[index] = measure();
+        }
+        known[index]
+    }
+
+    /// The cell's centre is [`CellGrid::free`].
+    fn cell_free(&self, c: Cell<D>) -> bool {
+        self.inside(self.centre(c)) && self.cell_clearance(c) > self.request.inflation
+    }
+
+    /// Whether the segment between the centres of the touching cells `a` and `b` keeps more than `inflation`
+    /// from every obstacle: at once when their clearances exceed it by half the segment (every point of it
+    /// lies within that of an end, and a distance changes no faster than the point), else measured.
+    fn step_keeps(&self, a: Cell<D>, b: Cell<D>, inflation: f64) -> bool {
+        let (from, to) = (self.centre(a), self.centre(b));
+        self.cell_clearance(a).min(self.cell_clearance(b)) - norm(sub(to, from)) / 2.0 > inflation
+            || segment_is_free(self.request.obstacles, from, to, inflation)
+    }
+
     /// Whether the step from cell `a` to its neighbour `b` is allowed: between free cells (or onto the goal)
     /// along a segment that keeps the inflation; from a cell within the inflation (the planner's cell rounded
     /// towards an obstacle, or a planner the map grew around), only a step that strictly gains clearance.
@@ -157,14 +205,12 @@ impl<'r, O: Obstacle<D>, const D: usize> CellGrid<'r, O, D> {
         if !(0..D).all(|axis| b[axis] >= 0 && b[axis] < self.counts[axis]) {
             return false;
         }
-        let (obstacles, inflation) = (self.request.obstacles, self.request.inflation);
-        let goal = self.cell_of(self.request.goal);
-        let (from, to) = (self.centre(a), self.centre(b));
-        if self.free(from) || a == goal {
-            (self.free(to) || b == goal) && segment_is_free(obstacles, from, to, inflation)
+        let goal = self.goal;
+        if self.cell_free(a) || a == goal {
+            (self.cell_free(b) || b == goal) && self.step_keeps(a, b, self.request.inflation)
         } else {
-            let here = clearance(obstacles, from);
-            self.inside(to) && clearance(obstacles, to) > here && segment_is_free(obstacles, from, to, here - 1e-9)
+            let here = self.cell_clearance(a);
+            self.inside(self.centre(b)) && self.cell_clearance(b) > here && self.step_keeps(a, b, here - 1e-9)
         }
     }
 
@@ -186,7 +232,7 @@ impl<'r, O: Obstacle<D>, const D: usize> CellGrid<'r, O, D> {
         heuristic: impl Fn(Cell<D>) -> u64,
     ) -> Result<Vec<Point<D>>, PlanError> {
         let request = self.request;
-        let (start, goal) = (self.cell_of(request.start), self.cell_of(request.goal));
+        let (start, goal) = (self.cell_of(request.start), self.goal);
         let successors = |&a: &Cell<D>| {
             let mut next = Vec::with_capacity(self.neighbours.len());
             for offset in &self.neighbours {
@@ -272,6 +318,18 @@ mod tests {
     fn an_open_plane_gives_the_straight_line() {
         let path = GridAStar::default().plan(&request(&[], 0.5)).unwrap();
         assert_eq!(path, vec![[0.0, 0.0], [10.0, 0.0]]);
+    }
+
+    #[test]
+    fn a_grid_too_large_to_remember_its_clearances_plans_the_same_path() {
+        // The same lattice (same lower corner and cell) in a workspace of 5.2 million cells and in one of
+        // 14,400: the large grid measures every clearance afresh, the small one remembers them.
+        let obstacles = [PlaneObstacle::Circle { center: [5.0, 0.3], radius: 1.0 }];
+        let small = GridAStar::default().plan(&request(&obstacles, 0.5)).unwrap();
+        let wide = PlanRequest { bounds: ([-1.0, -6.0], [250.0, 200.0]), ..request(&obstacles, 0.5) };
+        assert!(CellGrid::new(&wide, 0.1).unwrap().clearances.is_none());
+        assert!(CellGrid::new(&request(&obstacles, 0.5), 0.1).unwrap().clearances.is_some());
+        assert_eq!(GridAStar::default().plan(&wide).unwrap(), small);
     }
 
     #[test]
