@@ -24,9 +24,10 @@ pub enum Branch {
     /// `beta_query >= beta_old`: the planner moved along the raw path (at `beta_query`, whose certified set
     /// holds the new relative state whenever `beta_query > beta_old`).
     Advance,
-    /// `beta_query > beta_old` but the new relative state lies outside the faster row's certified set: the
-    /// planner moved along the raw path at `beta_old`, whose row stays in force; the rise is tried again at
-    /// the next step.
+    /// `beta_query > beta_old` but the rise was refused: the new relative state lies outside the faster row's
+    /// certified set, the move would bring the planner within the faster bound of a sensed obstacle, or (under
+    /// the planner rule) the raw path within that bound ahead does not keep it clear. The planner moved along
+    /// the raw path at `beta_old`, whose row stays in force; the rise is tried again at the next step.
     Steady,
     /// `beta_query < beta_old` and `s - Q p*` in the certified set of `beta_query`, with `p*` farther than
     /// `dTEBmax` from every sensed obstacle: the planner jumped to `p*`.

@@ -20,9 +20,9 @@ Each :meth:`OnlineLoop.step` takes the tracker state and the obstacles sensed no
    along the raw path for one control period, each axis at most ``beta_query dt`` (branch ``"advance"``),
    except on a rise whose new relative state the faster row's certified set does not hold: then it moves at
    ``beta_old``, whose row stays in force (branch ``"steady"``), as it does under the planner rule on a rise
-   whose path ahead, within the faster row's bound, does not keep that bound clear; and when the relative state has stayed outside
-   the certified set of the row in force for half the verification horizon, the planner is reset into it
-   under that row, a rise waiting for the next step (or holds). Every planner state a step ends with lies
+   whose path ahead, within the faster row's bound, does not keep that bound clear; and when the relative
+   state has stayed outside the certified set of the row in force for half the verification horizon, the
+   planner is reset into it under that row, a rise waiting for the next step (or holds). Every planner state a step ends with lies
    farther than the bound then in force from every sensed obstacle: a keep, a reset point or a move that
    would not is refused (a move on a rise then goes at ``beta_old``; otherwise the planner holds);
 5. reads ``u*`` at ``r_next = s - Q p_next`` under ``beta_query`` (``beta_old`` on a hold or a steady step).
@@ -80,8 +80,9 @@ from .v1 import models_pb2
 Branch = Literal["advance", "steady", "keep", "reset", "hold"]
 """adjustPlannerControl's branch: ``"advance"`` (``beta_query >= beta_old``: the planner moved along the raw
 path; on a rise only when the faster row's certified set holds the new relative state), ``"steady"``
-(``beta_query > beta_old`` but that set does not hold it: the planner moved at ``beta_old``, whose row stays
-in force), ``"keep"`` (``beta_query < beta_old`` and ``s - Q p*`` in the certified set of ``beta_query``: the
+(``beta_query > beta_old`` but the rise was refused, because that set does not hold it, the move would bring
+the planner within the faster bound of a sensed obstacle, or under the planner rule the path ahead within that
+bound does not keep it clear: the planner moved at ``beta_old``, whose row stays in force), ``"keep"`` (``beta_query < beta_old`` and ``s - Q p*`` in the certified set of ``beta_query``: the
 planner jumped to ``p*``), ``"reset"`` (``s - Q p*`` outside it: the planner was reset to a free point inside
 it, a replan flagged), ``"hold"`` (the planner waited where it is, ``beta_old`` and its bound still in force:
 no free point within ``dTEBmax`` of the tracker puts the relative state in it, or a move would have brought
