@@ -312,8 +312,8 @@ def test_the_planner_rule_takes_a_rise_only_where_the_path_ahead_keeps_the_faste
             # path can refuse the rise.
             moved = [[-fast.beta * 0.1, 0.0, ALONG_X, v] for v in np.linspace(0.1, 2.9, 29)]
             held = client.evaluate(MODEL, moved, fast.beta, out_of_domain="flag").in_teb
-            speed = moved[int(np.argmax(held))][3]
             assert held.any(), "beta_u's set holds no tracker on its planner"
+            speed = moved[int(np.argmax(held))][3]
             step = loop.step([0.0, 0.0, ALONG_X, speed], [obstacle])
             if rises:
                 assert step.branch == "advance" and step.beta_query == fast.beta, step
