@@ -41,6 +41,7 @@ pub struct PlannerSpeed {
 /// radius exceeds `d_obs / 2`, the slowest row (`beta_l`), else the largest `beta` whose radius is at most
 /// `d_obs / 2`. `rows` must be non-empty, sorted by `beta`, with monotone bounds (as a validated manifest
 /// and `GetModel` give them).
+#[inline]
 pub fn query_planner_control(rows: &[SpeedRow], d_obs: Option<f64>) -> PlannerSpeed {
     let steb_radius = rows[0].bound;
     let row = match d_obs {
@@ -70,6 +71,7 @@ pub enum SpeedRule {
 impl SpeedRule {
     /// The rule's speed at a point `clearance` from the nearest sensed obstacle (`None`: nothing sensed), as a
     /// planner that plans for speed estimates it along a path (the tracker on the planner).
+    #[inline]
     pub fn at_clearance(self, rows: &[SpeedRow], clearance: Option<f64>) -> PlannerSpeed {
         match (self, clearance) {
             (SpeedRule::Planner, Some(c)) => planner_rule(rows, c),
@@ -82,6 +84,7 @@ impl SpeedRule {
 /// to the nearest sensed obstacle less the farthest one control period can move it, or `beta_l` when none
 /// is. A tracker within the bound of a planner farther than the bound from every obstacle touches none of
 /// them, which is the condition the paper's rule reaches by asking for half the tracker's distance.
+#[inline]
 pub fn planner_rule(rows: &[SpeedRow], planner_clearance: f64) -> PlannerSpeed {
     let steb_radius = rows[0].bound;
     let row = rows.iter().rposition(|row| row.bound < planner_clearance).unwrap_or(0);

@@ -15,14 +15,54 @@ use crate::tracker::{Disturbance, RangeSensor, Tracker};
 use crate::visits::Visit;
 use crate::world::{World, WorldObstacle};
 use fastrack_client::{pb, FastrackClient};
-use fastrack_online::geometry::{clearance, norm, sub, PlaneObstacle, Point};
+use fastrack_online::geometry::{clearance, norm, sub, PlaneObstacle, Point, SpaceObstacle};
 use fastrack_proto::planner_speed::SpeedRow;
 use rand::rngs::StdRng;
 use rand::SeedableRng;
 use serde::{Deserialize, Serialize};
+use std::future::Future;
+use std::pin::Pin;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
 use tokio::task::JoinHandle;
+
+/// A run in progress: the future [`Simulated::run_compiled_here`] returns.
+pub type RunFuture<'a, O, const D: usize> = Pin<Box<dyn Future<Output = Result<Run<O, D>, MethodError>> + 'a>>;
+
+/// The obstacle kinds of the worlds the simulator runs. Each kind's run is compiled in this crate, and so
+/// optimised with it, whatever the build of the crate that calls it: a run generic over the obstacle kind
+/// is compiled where it is called, and in a debug build of a tool or a test its A* replans ran 25x slower.
+pub trait Simulated<const D: usize>: WorldObstacle<D> {
+    /// [`Simulator::run`] through a world of this kind of obstacle.
+    fn run_compiled_here<'a>(
+        simulator: &'a Simulator,
+        world: &'a World<Self, D>,
+        method: &'a Method,
+        seed: u64,
+    ) -> RunFuture<'a, Self, D>;
+}
+
+impl Simulated<2> for PlaneObstacle {
+    fn run_compiled_here<'a>(
+        simulator: &'a Simulator,
+        world: &'a World<Self, 2>,
+        method: &'a Method,
+        seed: u64,
+    ) -> RunFuture<'a, Self, 2> {
+        Box::pin(simulator.run_world(world, method, seed))
+    }
+}
+
+impl Simulated<3> for SpaceObstacle {
+    fn run_compiled_here<'a>(
+        simulator: &'a Simulator,
+        world: &'a World<Self, 3>,
+        method: &'a Method,
+        seed: u64,
+    ) -> RunFuture<'a, Self, 3> {
+        Box::pin(simulator.run_world(world, method, seed))
+    }
+}
 
 /// How a run is simulated.
 #[derive(Debug, Clone, PartialEq)]
@@ -325,7 +365,7 @@ impl Simulator {
 
     /// Runs `method` through `world` on a thread of its own (see the module's doc), its randomness seeded
     /// by `seed`.
-    pub fn spawn_run<O: WorldObstacle<D>, const D: usize>(
+    pub fn spawn_run<O: Simulated<D>, const D: usize>(
         self: &Arc<Self>,
         world: World<O, D>,
         method: Method,
@@ -338,7 +378,17 @@ impl Simulator {
     /// Runs `method` through `world`, its randomness seeded by `seed`. Whatever the server does, the run
     /// ends with an [`Outcome`]; an error means only that the method cannot run on this model (a world of
     /// another dimension than the model's planner among them).
-    pub async fn run<O: WorldObstacle<D>, const D: usize>(
+    pub async fn run<O: Simulated<D>, const D: usize>(
+        &self,
+        world: &World<O, D>,
+        method: &Method,
+        seed: u64,
+    ) -> Result<Run<O, D>, MethodError> {
+        O::run_compiled_here(self, world, method, seed).await
+    }
+
+    /// [`Simulator::run`] for any kind of obstacle; called only by the [`Simulated`] kinds.
+    async fn run_world<O: WorldObstacle<D>, const D: usize>(
         &self,
         world: &World<O, D>,
         method: &Method,

@@ -10,7 +10,7 @@ use fastrack_sim::bench::{
     beta_share_table, paper_comparison, summarise, summary_json, table, time_ratio, BenchPart, BenchRun, Summary,
     FIGURE_WORLD, PART_STEM,
 };
-use fastrack_sim::episode::{Outcome, Run, Simulator};
+use fastrack_sim::episode::{Outcome, Run, Simulated, Simulator};
 use fastrack_sim::methods::Method;
 use fastrack_sim::plot::{methods_on_one_world, time_to_goal, Outlined, View};
 use fastrack_sim::visits::write_csv;
@@ -76,7 +76,7 @@ pub(super) async fn run(client: &FastrackClient, args: Args, json_mode: bool) ->
 }
 
 /// The benchmark through worlds of `D` axes.
-async fn bench_in<O: WorldObstacle<D> + Outlined<D>, const D: usize>(
+async fn bench_in<O: Simulated<D> + Outlined<D>, const D: usize>(
     simulator: Arc<Simulator>,
     args: Args,
     shard: Shard,

@@ -5,9 +5,9 @@ use anyhow::Context as _;
 use fastrack_cli::load_generator::LatencySummary;
 use fastrack_client::FastrackClient;
 use fastrack_lab::record::write_record;
-use fastrack_sim::episode::Simulator;
+use fastrack_sim::episode::{Simulated, Simulator};
 use fastrack_sim::methods::Method;
-use fastrack_sim::world::{World, WorldObstacle};
+use fastrack_sim::world::World;
 use serde_json::json;
 use std::sync::Arc;
 use std::time::{Duration, Instant};
@@ -33,7 +33,7 @@ pub(super) async fn run(client: &FastrackClient, args: Args, json_mode: bool) ->
 }
 
 /// The fleet through worlds of `D` axes.
-async fn fleet_in<O: WorldObstacle<D>, const D: usize>(
+async fn fleet_in<O: Simulated<D>, const D: usize>(
     simulator: Arc<Simulator>,
     args: Args,
     json_mode: bool,

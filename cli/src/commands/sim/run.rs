@@ -5,11 +5,10 @@ use super::{print, world_of, Generation, Simulation};
 use anyhow::Context as _;
 use fastrack_cli::load_generator::LatencySummary;
 use fastrack_client::FastrackClient;
-use fastrack_sim::episode::{Outcome, Run, Simulator};
+use fastrack_sim::episode::{Outcome, Run, Simulated, Simulator};
 use fastrack_sim::methods::Method;
 use fastrack_sim::plot::{over_time, trajectory, Outlined, View};
 use fastrack_sim::viewer::write_html;
-use fastrack_sim::world::WorldObstacle;
 use serde_json::json;
 use std::path::PathBuf;
 
@@ -71,7 +70,7 @@ pub(super) async fn run(client: &FastrackClient, args: Args, json_mode: bool) ->
 }
 
 /// One run in a world of `D` axes, its trajectory drawn in each of the dimension's views.
-async fn run_in<O: WorldObstacle<D> + Outlined<D>, const D: usize>(
+async fn run_in<O: Simulated<D> + Outlined<D>, const D: usize>(
     simulator: &std::sync::Arc<Simulator>,
     args: Args,
     json_mode: bool,
