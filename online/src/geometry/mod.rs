@@ -123,9 +123,15 @@ pub fn dot<const D: usize>(a: Point<D>, b: Point<D>) -> f64 {
     (0..D).map(|axis| a[axis] * b[axis]).sum()
 }
 
-/// Euclidean norm (`hypot` over the axes in turn: in the plane exactly `a[0].hypot(a[1])`).
+/// Euclidean norm: in the plane exactly `a[0].hypot(a[1])`, as the Python port computes it; in space the
+/// square root of the sum of squares (`hypot`'s care for overflow costs a third of a 3-D replan, and
+/// workspace coordinates never come near it).
 pub fn norm<const D: usize>(a: Point<D>) -> f64 {
-    a.iter().fold(0.0, |n, &x| n.hypot(x))
+    if D == 2 {
+        a[0].hypot(a[1])
+    } else {
+        a.iter().map(|x| x * x).sum::<f64>().sqrt()
+    }
 }
 
 /// The largest axis displacement, `max_i |a_i|`: a planner bounded to `beta` per axis needs this over `beta`

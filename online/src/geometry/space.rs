@@ -97,9 +97,10 @@ impl Obstacle<3> for SpaceObstacle {
                 norm::<3>(std::array::from_fn(|axis| (min[axis] - p[axis]).max(p[axis] - max[axis]).max(0.0)))
             }
             SpaceObstacle::Pillar { center, radius, bottom, top } => {
-                let radial = (norm(sub([p[0], p[1]], *center)) - radius).max(0.0);
+                let (dx, dy) = (p[0] - center[0], p[1] - center[1]);
+                let radial = ((dx * dx + dy * dy).sqrt() - radius).max(0.0);
                 let vertical = (bottom - p[2]).max(p[2] - top).max(0.0);
-                radial.hypot(vertical)
+                norm([radial, vertical, 0.0])
             }
             SpaceObstacle::Floor { height } => (p[2] - height).max(0.0),
             SpaceObstacle::Ceiling { height } => (height - p[2]).max(0.0),
