@@ -27,7 +27,7 @@ fn refused(status: tonic::Status) -> LoopError {
 }
 
 impl LocalModel {
-    /// Loads the bundle in the version folder `dir` (e.g. `models/dubins4d/4`) through the ONNX Runtime
+    /// Loads the bundle in the version folder `dir` (e.g. `models/dubins4d/5`) through the ONNX Runtime
     /// library `library` (`None`: where the project installs it), with `sessions` sessions for runs at once.
     pub fn load(dir: &Path, library: Option<&Path>, sessions: usize) -> Result<Self, MethodError> {
         let fail = |e: &dyn std::fmt::Display| MethodError::Setup(format!("loading the bundle {}: {e}", dir.display()));

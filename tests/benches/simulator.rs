@@ -18,7 +18,7 @@ use std::path::Path;
 use std::time::Instant;
 
 const WORLDS: u64 = 10;
-const BUNDLE: &str = "dubins4d/4";
+const BUNDLE: &str = "dubins4d/5";
 
 /// Control periods per second over every run of `method` on `worlds`, and the runs.
 async fn rate(simulator: &Simulator, worlds: &[PlaneWorld], method: &Method) -> anyhow::Result<(f64, Vec<PlaneRun>)> {

@@ -71,7 +71,7 @@ fn a_missing_or_broken_bundle_is_refused_with_its_folder_named() {
     let Err(error) = LocalModel::load(missing, None, 1) else { panic!("a missing bundle loaded") };
     assert!(error.to_string().contains("no/such/bundle/1"), "{error}");
     let dir = tempfile::tempdir().unwrap();
-    let broken = dir.path().join("dubins4d/4");
+    let broken = dir.path().join("dubins4d/5");
     std::fs::create_dir_all(&broken).unwrap();
     for file in ["manifest.json", "model.onnx"] {
         std::fs::copy(shipped_bundle().join(file), broken.join(file)).unwrap();

@@ -55,7 +55,7 @@ async fn the_loops_visits_are_recorded_and_verified_as_the_operational_distribut
 
     // Each visit is a row's beta and a relative state; a keep or a reset put the state in that row's
     // certified set, as the server answers membership.
-    let info = client.get_model(model_ref("dubins4d", 4)).await.unwrap();
+    let info = client.get_model(model_ref("dubins4d", 5)).await.unwrap();
     let betas: Vec<f64> = info.teb_table.iter().map(|row| row.beta).collect();
     let (mut branches, mut checked) = (std::collections::BTreeMap::<String, usize>::new(), Vec::new());
     for line in &lines {
@@ -76,12 +76,12 @@ async fn the_loops_visits_are_recorded_and_verified_as_the_operational_distribut
         let states = checked.iter().flat_map(|n| n[1..].to_vec()).collect();
         let params = checked.iter().map(|n| n[0]).collect();
         let reply =
-            client.evaluate_value(model_ref("dubins4d", 4), states, params, pb::OutOfDomainPolicy::Flag).await.unwrap();
+            client.evaluate_value(model_ref("dubins4d", 5), states, params, pb::OutOfDomainPolicy::Flag).await.unwrap();
         assert!(reply.in_teb.iter().all(|&inside| inside), "a keep or reset outside the certified set");
     }
 
     // Verification draws its operational check from them: as many draws as the uniform check has samples.
-    let bundle = models.join("dubins4d/4");
+    let bundle = models.join("dubins4d/5");
     let results = at("results");
     let verify = |states: &str| {
         Command::new(fastrack_e2e::binary("fastrack-grid"))

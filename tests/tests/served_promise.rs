@@ -2,7 +2,7 @@
 //! relative state lies in the row's certified set (`in_teb`, `V <= set_level`), the tracking error stays
 //! within the row's bound (`GetTrackingErrorBound.radius`), whatever the planner does.
 //!
-//! The check is the one a safety reviewer would run on `dubins4d/4`: the tracker starts on the planner (zero
+//! The check is the one a safety reviewer would run on `dubins4d/5`: the tracker starts on the planner (zero
 //! position error, where every start and every planner reset puts a robot) at every heading and at speeds
 //! from 0.25 to 2 m/s; a tracker integrated here (RK4 of the car's own equations, the served control held for
 //! the manifest's verification step) plays against the planner that plays the worst case of the served
@@ -53,7 +53,7 @@ async fn largest_errors(client: &FastrackClient, starts: &[[f64; 4]], beta: f64,
     for _ in 0..(HORIZON / step).round() as usize {
         let flat = states.iter().flatten().copied().collect();
         let reply = client
-            .evaluate_value(model_ref("dubins4d", 4), flat, vec![beta; states.len()], pb::OutOfDomainPolicy::Flag)
+            .evaluate_value(model_ref("dubins4d", 5), flat, vec![beta; states.len()], pb::OutOfDomainPolicy::Flag)
             .await
             .unwrap();
         for (i, r) in states.iter_mut().enumerate() {
@@ -71,20 +71,20 @@ async fn largest_errors(client: &FastrackClient, starts: &[[f64; 4]], beta: f64,
 async fn from_the_states_served_as_inside_the_error_stays_within_the_bound() {
     let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
     let (_server, client) = TestServer::start_serving(&repo).await;
-    let info = client.get_model(model_ref("dubins4d", 4)).await.unwrap();
+    let info = client.get_model(model_ref("dubins4d", 5)).await.unwrap();
     let starts = zero_error_starts();
     let mut uncertified_breaks = 0;
     // The two rows where a worst-case planner breaks the bound from outside the certified set.
     for beta in [0.5, 0.7] {
         let row = info.teb_table.iter().find(|r| (r.beta - beta).abs() < 1e-9).unwrap();
         let step = row.verification.as_ref().expect("a verified row").step;
-        let teb = client.tracking_error_bound(model_ref("dubins4d", 4), beta, 0).await.unwrap();
+        let teb = client.tracking_error_bound(model_ref("dubins4d", 5), beta, 0).await.unwrap();
         assert_eq!((teb.level, teb.radius), (row.set_level, row.bound));
         assert!(row.set_level < row.bound, "beta {beta}: the bound correction left the set below the bound");
 
         let flat = starts.iter().flatten().copied().collect();
         let at_start = client
-            .evaluate_value(model_ref("dubins4d", 4), flat, vec![beta; starts.len()], pb::OutOfDomainPolicy::Flag)
+            .evaluate_value(model_ref("dubins4d", 5), flat, vec![beta; starts.len()], pb::OutOfDomainPolicy::Flag)
             .await
             .unwrap();
         // Membership as served is membership in the certified set.

@@ -79,7 +79,7 @@ fn a_benchmark_in_shards_merges_into_the_single_run() {
 
 #[test]
 fn a_verification_in_shards_merges_into_the_single_run() {
-    let bundle = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/dubins4d/4");
+    let bundle = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models/dubins4d/5");
     let out = tempfile::tempdir().unwrap();
     let at = |name: &str| out.path().join(name).to_str().unwrap().to_string();
     let (results, parts) = (at("results"), at("parts"));
@@ -104,7 +104,7 @@ fn a_verification_in_shards_merges_into_the_single_run() {
             .collect::<Vec<_>>(),
     );
     let manifest = |root: &str| -> Value {
-        let text = std::fs::read(out.path().join(root).join("dubins4d/4/manifest.json")).unwrap();
+        let text = std::fs::read(out.path().join(root).join("dubins4d/5/manifest.json")).unwrap();
         serde_json::from_slice::<Value>(&text).unwrap()["teb_table"].clone()
     };
     assert_eq!(manifest("whole"), manifest("merged"));

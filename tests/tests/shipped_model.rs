@@ -1,4 +1,4 @@
-//! The shipped trained model `models/dubins4d/4`, served by the real server: it loads (checksum, schema,
+//! The shipped trained model `models/dubins4d/5`, served by the real server: it loads (checksum, schema,
 //! graph), says it is trained and verified, serves its table as written, its values keep the property every
 //! value function has, `V >= l` (the error can only be at least the current one), on random states, and its
 //! served control never pushes the speed past the tracker's limits. Every row's certified set holds states
@@ -16,7 +16,7 @@ const BELOW_L_TOLERANCE: f64 = 0.1;
 #[tokio::test(flavor = "multi_thread", worker_threads = 2)]
 async fn the_shipped_dubins4d_model_is_trained_verified_and_served() {
     let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
-    let (evaluator, manifest) = evaluator_for(&repo.join("dubins4d/4"));
+    let (evaluator, manifest) = evaluator_for(&repo.join("dubins4d/5"));
     assert!(!manifest.untrained);
     assert_eq!(manifest.network.periodic_encoding, PeriodicEncoding::Circle);
     assert_eq!(manifest.state[3].limits, Some([0.1, 2.9]), "the speed limits");
@@ -112,7 +112,7 @@ fn proposals(rng: &mut impl Rng, reach: f64, count: usize) -> Vec<f64> {
 async fn every_certified_set_can_be_entered_and_the_table_says_where_they_nest() {
     let repo = Path::new(env!("CARGO_MANIFEST_DIR")).join("../models");
     let (_server, client) = TestServer::start_serving(&repo).await;
-    let model = || model_ref("dubins4d", 4);
+    let model = || model_ref("dubins4d", 5);
     let table = client.get_model(model()).await.unwrap().teb_table;
     let in_teb = |states: Vec<f64>, beta: f64| {
         let params = vec![beta; states.len() / 4];

@@ -23,7 +23,7 @@ import fastrack
 ROOT = Path(__file__).resolve().parents[3]
 MODELS = ROOT / "models"
 MODEL = "dubins4d"
-VERSION = 4  # the shipped version of MODEL, its default
+VERSION = 5  # the shipped version of MODEL, its default
 USER_TOKEN = "user-token-7f3a9c2e"
 ADMIN_TOKEN = "admin-token-5d8e0a4f"
 

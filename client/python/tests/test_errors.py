@@ -27,7 +27,7 @@ def test_nan_in_states_is_refused_by_the_server(client: fastrack.Client) -> None
 def test_wrong_shapes_are_refused_before_sending(client: fastrack.Client) -> None:
     with pytest.raises(fastrack.InvalidArgument) as states:
         client.evaluate(MODEL, [[0.1, 0.2, 0.3]], 1.0)
-    assert states.value.message.startswith("states has shape [1, 3]; model dubins4d/4 needs [N, n_state] = [N, 4]")
+    assert states.value.message.startswith("states has shape [1, 3]; model dubins4d/5 needs [N, n_state] = [N, 4]")
     with pytest.raises(fastrack.InvalidArgument, match=r"states has shape \[4\]"):
         client.tracking_control(MODEL, [0.1, 0.2, 0.3, 1.0], 1.0)
     with pytest.raises(fastrack.InvalidArgument, match=r"params has shape \[2, 2\]; .* needs \[N, n_params\] = \[1, 1\]"):

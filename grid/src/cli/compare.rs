@@ -20,7 +20,7 @@ use std::path::{Path, PathBuf};
 /// Arguments of `compare`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// The bundle's version folder, e.g. `models/dubins4d/4`.
+    /// The bundle's version folder, e.g. `models/dubins4d/5`.
     #[arg(long)]
     bundle: PathBuf,
     #[command(flatten)]

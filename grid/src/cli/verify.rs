@@ -169,7 +169,7 @@ pub struct Args {
 /// The bundle a command reads, and the ONNX Runtime that evaluates it.
 #[derive(clap::Args)]
 pub(super) struct BundleSource {
-    /// The bundle's version folder, e.g. `models/dubins4d/4`.
+    /// The bundle's version folder, e.g. `models/dubins4d/5`.
     #[arg(long)]
     pub(super) bundle: PathBuf,
     /// ONNX Runtime library (default: FASTRACK_ORT_LIB, then .cache/onnxruntime).

@@ -15,7 +15,7 @@ use std::path::PathBuf;
 /// Arguments of `verify-bench`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// The bundle's version folder, e.g. `models/dubins4d/4`.
+    /// The bundle's version folder, e.g. `models/dubins4d/5`.
     #[arg(long)]
     bundle: PathBuf,
     /// Planner speed bound of the rollouts.

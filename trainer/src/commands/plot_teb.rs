@@ -6,7 +6,7 @@ use std::path::PathBuf;
 /// Arguments of `plot-teb`.
 #[derive(clap::Args)]
 pub struct Args {
-    /// The bundle's version folder, e.g. `models/dubins4d/4`.
+    /// The bundle's version folder, e.g. `models/dubins4d/5`.
     #[arg(long)]
     bundle: PathBuf,
     /// Grid solution files (`.ftgrid`) whose `V_min` is drawn as the reference.
