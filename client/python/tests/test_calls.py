@@ -67,7 +67,7 @@ def test_query_planner_control_matches_the_rust_cli(client: fastrack.Client, ser
         assert answer.steb_exceeds_half_distance == rust["steb_exceeds_half_distance"]
         assert answer.model_version == VERSION
     # The documented answers of the shipped table.
-    assert client.query_planner_control(MODEL, d_obs=2.5).beta_query == pytest.approx(0.8)
+    assert client.query_planner_control(MODEL, d_obs=2.5).beta_query == pytest.approx(0.75)
     slow = client.query_planner_control(MODEL, d_obs=0.8)
     assert slow.beta_query == pytest.approx(0.5) and slow.steb_exceeds_half_distance
     assert client.query_planner_control(MODEL).beta_query == pytest.approx(1.25)

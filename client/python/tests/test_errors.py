@@ -136,7 +136,7 @@ def test_no_or_unknown_token_is_unauthenticated(authed: dict[str, fastrack.Clien
 
 def test_user_token_on_an_admin_call_is_permission_denied(authed: dict[str, fastrack.Client]) -> None:
     user = authed["user"]
-    assert user.query_planner_control(MODEL, 2.5).beta_query == pytest.approx(0.8)
+    assert user.query_planner_control(MODEL, 2.5).beta_query == pytest.approx(0.75)
     with user.track(MODEL) as robot:  # streams carry the token too
         assert robot.tick([0.0, 0.0, 0.0, 1.0], [0.0, 0.0]).seq == 0
     with pytest.raises(fastrack.PermissionDenied) as denied:

@@ -54,7 +54,7 @@ def test_ros_free_tracking_controller(client: fastrack.Client) -> None:
         controller.on_planner_state([0.1, -0.2])
         controller.on_obstacle_distance(2.5)
         step = controller.on_tracker_state([0.3, -0.5, 1.0, 1.5])
-        assert step is not None and step.beta_query == pytest.approx(0.8)
+        assert step is not None and step.beta_query == pytest.approx(0.75)
         expected = client.tracking_control(MODEL, [[0.2, -0.3, 1.0, 1.5]], step.beta_query).controls[0]
         np.testing.assert_allclose(step.control, expected, rtol=1e-9, atol=0)
         controller.on_obstacle_distance(-1.0)  # none sensed: the fastest speed

@@ -238,10 +238,10 @@ def test_a_drop_in_beta_keeps_p_star_when_the_tracker_is_inside_the_smaller_boun
     with online(client) as loop:
         tracker = [0.0, 0.0, ALONG_X, 1.0]
         loop.step(tracker)
-        obstacle = Circle((3.0, 0.0), 0.5)  # 2.5 m ahead: beta drops to the largest row whose bound fits 1.25 m
+        obstacle = Circle((3.1, 0.0), 0.5)  # 2.6 m ahead: beta drops to the largest row whose bound fits 1.3 m
         step = loop.step(tracker, [obstacle])
-        assert step.d_obs == 2.5
-        assert step.beta_query < step.beta_old and step.dteb_radius <= 1.25, step
+        assert step.d_obs == 2.6
+        assert step.beta_query < step.beta_old and step.dteb_radius <= 1.3, step
         assert step.replanned, "a newly sensed obstacle is planned around"
         assert step.branch == "keep" and step.round_trips == 1, step
         assert step.in_teb and step.value <= step.dteb_radius
@@ -347,7 +347,7 @@ def test_a_tracker_past_the_workspace_edge_is_reset_inside_the_workspace(client:
     with online(client, bounds=((-2.0, -6.0), (12.0, 2.2))) as loop:
         loop.step([0.0, 0.0, ALONG_X, 1.0])
         tracker = [0.0, 2.5, ALONG_X, 1.0]
-        step = loop.step(tracker, [Circle((0.0, 5.5), 0.5)])
+        step = loop.step(tracker, [Circle((0.0, 5.6), 0.5)])  # 2.6 m: beta drops to 0.8, whose set has room
         assert step.branch == "reset", step
         assert step.planner[1] <= 2.2, "the reset point lies inside the workspace"
         assert math.hypot(step.planner[0] - tracker[0], step.planner[1] - tracker[1]) <= step.dteb_radius

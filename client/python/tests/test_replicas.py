@@ -411,7 +411,7 @@ def test_addresses_are_checked_and_names_resolved(server: Server) -> None:
     with fastrack.Client(f"localhost:{port}") as named:  # every address localhost has is a replica
         assert named.endpoints and all(e.endswith(f":{port}") for e in named.endpoints), named.endpoints
         assert f"127.0.0.1:{port}" in named.endpoints
-        assert named.query_planner_control(MODEL, 2.5).beta_query == pytest.approx(0.8)
+        assert named.query_planner_control(MODEL, 2.5).beta_query == pytest.approx(0.75)
 
 
 def test_a_replica_at_its_stream_limit_passes_new_streams_to_another(server: Server) -> None:

@@ -125,7 +125,7 @@ def mtls_server(pki: Pki) -> Iterator[Server]:
 def test_server_tls(pki: Pki, tls_server: Server) -> None:
     port = tls_server.port
     with fastrack.Client(f"https://localhost:{port}", tls=fastrack.Tls(ca=pki.ca.cert)) as client:
-        assert client.query_planner_control(MODEL, 2.5).beta_query == pytest.approx(0.8)
+        assert client.query_planner_control(MODEL, 2.5).beta_query == pytest.approx(0.75)
         with client.track(MODEL) as robot:
             assert robot.tick([0.0, 0.0, 0.0, 1.0], [0.0, 0.0]).seq == 0
     # The certificate also names 127.0.0.1; the CA may be given as a file path.

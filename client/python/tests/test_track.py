@@ -48,7 +48,7 @@ def test_track_matches_tracking_control(client: fastrack.Client) -> None:
     tracker, planner = [0.4, -0.3, 1.0, 1.5], [0.1, 0.2]
     with client.track(MODEL) as robot:
         reply = robot.tick(tracker, planner, d_obs=2.5)
-    assert reply.beta_query == pytest.approx(0.8)
+    assert reply.beta_query == pytest.approx(0.75)
     unary = client.tracking_control(MODEL, [[0.3, -0.5, 1.0, 1.5]], reply.beta_query)
     np.testing.assert_allclose(reply.control, unary.controls[0], rtol=1e-9, atol=0)
     assert reply.value == pytest.approx(unary.values[0], rel=1e-9)
@@ -107,7 +107,7 @@ async def test_fifty_async_robots_at_once(server: Server) -> None:
 async def test_async_errors_and_pipelining(server: Server) -> None:
     async with fastrack.AsyncClient(server.address) as client:
         assert await client.health() == "SERVING"
-        assert (await client.query_planner_control(MODEL, 2.5)).beta_query == pytest.approx(0.8)
+        assert (await client.query_planner_control(MODEL, 2.5)).beta_query == pytest.approx(0.75)
         with pytest.raises(fastrack.NotFound):
             await client.get_model("dubins4x")
         async with client.track(MODEL) as robot:
