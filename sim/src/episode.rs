@@ -42,27 +42,24 @@ pub trait Simulated<const D: usize>: WorldObstacle<D> {
     ) -> RunFuture<'a, Self, D>;
 }
 
-impl Simulated<2> for PlaneObstacle {
-    fn run_compiled_here<'a>(
-        simulator: &'a Simulator,
-        world: &'a World<Self, 2>,
-        method: &'a Method,
-        seed: u64,
-    ) -> RunFuture<'a, Self, 2> {
-        Box::pin(simulator.run_world(world, method, seed))
-    }
+/// Implements [`Simulated`] for an obstacle kind of worlds of `D` axes.
+macro_rules! simulated {
+    ($obstacle:ty, $dim:literal) => {
+        impl Simulated<$dim> for $obstacle {
+            fn run_compiled_here<'a>(
+                simulator: &'a Simulator,
+                world: &'a World<Self, $dim>,
+                method: &'a Method,
+                seed: u64,
+            ) -> RunFuture<'a, Self, $dim> {
+                Box::pin(simulator.run_world(world, method, seed))
+            }
+        }
+    };
 }
 
-impl Simulated<3> for SpaceObstacle {
-    fn run_compiled_here<'a>(
-        simulator: &'a Simulator,
-        world: &'a World<Self, 3>,
-        method: &'a Method,
-        seed: u64,
-    ) -> RunFuture<'a, Self, 3> {
-        Box::pin(simulator.run_world(world, method, seed))
-    }
-}
+simulated!(PlaneObstacle, 2);
+simulated!(SpaceObstacle, 3);
 
 /// How a run is simulated.
 #[derive(Debug, Clone, PartialEq)]
