@@ -100,7 +100,7 @@ impl Obstacle<3> for SpaceObstacle {
                 let (dx, dy) = (p[0] - center[0], p[1] - center[1]);
                 let radial = ((dx * dx + dy * dy).sqrt() - radius).max(0.0);
                 let vertical = (bottom - p[2]).max(p[2] - top).max(0.0);
-                norm([radial, vertical, 0.0])
+                (radial * radial + vertical * vertical).sqrt()
             }
             SpaceObstacle::Floor { height } => (p[2] - height).max(0.0),
             SpaceObstacle::Ceiling { height } => (height - p[2]).max(0.0),
