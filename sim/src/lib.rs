@@ -3,8 +3,8 @@
 //! methods compared ([`methods`]: Parametric FaSTrack over the `Track` stream, FaSTrack at fixed speeds,
 //! Meta-FaSTrack, MPPI), where they get their answers ([`backend`]: the service, or the model in this
 //! process), one run of a method through a world ([`episode`]), the benchmark's summaries ([`bench`]), the
-//! relative states the online loop visited ([`visits`]), its golden traces ([`trace`]), the figures
-//! ([`plot`]) and a run in space to turn in a browser ([`viewer`]).
+//! relative states the online loop visited ([`visits`]), its golden traces ([`trace`]), the served promise checked in closed loop row by row
+//! ([`promise`]), the figures ([`plot`]) and a run in space to turn in a browser ([`viewer`]).
 
 #![warn(missing_docs)]
 
@@ -15,6 +15,7 @@ pub mod episode;
 pub mod in_process;
 pub mod methods;
 pub mod plot;
+pub mod promise;
 pub mod trace;
 pub mod tracker;
 pub mod viewer;

@@ -111,7 +111,7 @@ pub struct Args {
     no_zero_error_slice: bool,
     /// Relative states the online loop visited in simulated runs (`fastrack sim bench --visits FILE`): each
     /// round also rolls out as many draws from those of them inside its set as the uniform check (none: no
-    /// operational check).
+    /// operational check). With --axis-of, the composite's states, projected on the axes this bundle serves.
     #[arg(long)]
     operational_states: Option<PathBuf>,
     /// Starts of the falsification search over start states: the samples the other checks pushed furthest
@@ -297,9 +297,14 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     );
     let betas = (!args.betas.is_empty()).then_some(&args.betas[..]);
     let started = Instant::now();
-    let state_names: Vec<String> = bundle.manifest.state.iter().map(|d| d.name.clone()).collect();
-    let operational =
-        args.operational_states.as_deref().map(|path| RecordedStates::read(path, &state_names)).transpose()?;
+    let operational = match (args.operational_states.as_deref(), &composite) {
+        (None, _) => None,
+        (Some(path), None) => Some(RecordedStates::read(path, &state_names(&bundle.manifest))?),
+        (Some(path), Some(composite)) => {
+            let recorded = RecordedStates::read(path, &state_names(&composite.manifest))?;
+            Some(axes::axis_states(&composite.manifest, &bundle.manifest, &recorded)?)
+        }
+    };
     if let Some(recorded) = &operational {
         println!("operational states: {} recorded, by branch {:?}", recorded.len(), recorded.branches);
     }
@@ -328,6 +333,11 @@ pub fn run(args: Args) -> anyhow::Result<()> {
     let reports = combine_pieces(reports)?;
     let out = args.recording.outputs(args.out.as_deref());
     finish(&evaluator, bundle, &system, reports, config, &out)
+}
+
+/// A bundle's state coordinates by name, in order.
+fn state_names(manifest: &Manifest) -> Vec<String> {
+    manifest.state.iter().map(|d| d.name.clone()).collect()
 }
 
 /// Where a verification's results go.

@@ -12,7 +12,7 @@
 //! axis subsystem that serves several axes, quad10d's x for x and y, counts once per axis). What `eps` bounds changes with it: the share of each axis' sampled set whose
 //! excess may pass its bound, not the share of the composite's set.
 
-use super::{Correction, ErrorScale, Outcome, RoundReport, RowReport, VerifyError};
+use super::{Correction, ErrorScale, Outcome, RecordedStates, RoundReport, RowReport, VerifyError};
 use fastrack_valuefn::manifest::{CheckResult, Manifest, PlannerResult, TebRow, Verification};
 use fastrack_valuefn::runtime::Evaluator;
 use fastrack_valuefn::system::decomposition;
@@ -53,6 +53,24 @@ fn check_axis(composite: &Manifest, axis: &Manifest) -> Result<(), VerifyError> 
             known.join(", ")
         )))
     }
+}
+
+/// The composite's recorded states (`fastrack sim bench --visits`) as states of the axis bundle's subsystem:
+/// each state's projection on every axis that subsystem serves (quad10d's x network: the x and the y axis),
+/// so that the axis' operational check draws from every place the online loop put one of its axes.
+pub fn axis_states(
+    composite: &Manifest,
+    axis: &Manifest,
+    recorded: &RecordedStates,
+) -> Result<RecordedStates, VerifyError> {
+    check_axis(composite, axis)?;
+    let groups: Vec<Vec<usize>> = decomposition(&composite.system.id)
+        .unwrap_or_default()
+        .into_iter()
+        .filter(|a| a.subsystem == axis.system.id)
+        .map(|a| a.coords)
+        .collect();
+    recorded.projected(&groups).map_err(VerifyError::Operational)
 }
 
 /// The rows an axis bundle is verified at for `composite`: the composite's betas, each with the level whose

@@ -99,6 +99,28 @@ impl RecordedStates {
     pub fn is_empty(&self) -> bool {
         self.states.is_empty()
     }
+
+    /// Each state's projections on `groups` of its coordinates (the coordinates of the axes one axis
+    /// subsystem serves), each projection a state of its own with its visit's `beta`; branch counts count
+    /// the projections. A coordinate beyond the recorded state is an error naming it.
+    pub fn projected(&self, groups: &[Vec<usize>]) -> Result<Self, String> {
+        let n_state = match groups.first() {
+            Some(first) if groups.iter().all(|g| g.len() == first.len()) && !first.is_empty() => first.len(),
+            _ => return Err("the projection needs coordinate groups of one non-zero length".into()),
+        };
+        if let Some(&bad) = groups.iter().flatten().find(|&&c| c >= self.n_state) {
+            return Err(format!("coordinate {bad} is beyond the recorded states' {} coordinates", self.n_state));
+        }
+        let (mut states, mut betas) = (Vec::new(), Vec::new());
+        for (state, &beta) in self.states.chunks(self.n_state).zip(&self.betas) {
+            for group in groups {
+                states.extend(group.iter().map(|&c| state[c]));
+                betas.push(beta);
+            }
+        }
+        let branches = self.branches.iter().map(|(name, &count)| (name.clone(), count * groups.len())).collect();
+        Ok(Self { states, betas, n_state, branches })
+    }
 }
 
 /// The recorded states taken while a row was in force, and how many of them lie outside that row's set (or
@@ -201,6 +223,20 @@ mod tests {
         assert_eq!(recorded.betas, [1.0, 0.5, 1.0]);
         assert_eq!(recorded.branches.get("advance"), Some(&2));
         assert_eq!(recorded.branches.get("keep"), Some(&1));
+    }
+
+    #[test]
+    fn a_projection_makes_one_state_per_group_with_its_visits_beta() {
+        let text = "branch,beta,x_r,y_r,theta,v\nadvance,1.0,1,2,3,4\nhold,0.5,5,6,7,8\n";
+        let recorded = RecordedStates::parse(text, &names()).unwrap();
+        let projected = recorded.projected(&[vec![0, 2], vec![1, 3]]).unwrap();
+        assert_eq!(projected.len(), 4);
+        assert_eq!(projected.states, [1.0, 3.0, 2.0, 4.0, 5.0, 7.0, 6.0, 8.0]);
+        assert_eq!(projected.betas, [1.0, 1.0, 0.5, 0.5]);
+        assert_eq!(projected.branches.get("hold"), Some(&2));
+        let why = recorded.projected(&[vec![0, 4]]).unwrap_err();
+        assert!(why.contains("coordinate 4"), "{why}");
+        assert!(recorded.projected(&[vec![0], vec![1, 2]]).is_err());
     }
 
     #[test]

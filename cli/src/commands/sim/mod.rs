@@ -1,6 +1,7 @@
 //! `fastrack sim`: the navigation simulator against the server: `run` (one world, one method, a summary and
 //! figures), `bench` (seeded worlds x methods, the paper's Table 1, a record), `fleet` (many robots on one
-//! server at once) and `world` (generate or check a world file).
+//! server at once), `world` (generate or check a world file) and `promise` (each served row's promise in
+//! closed loop).
 
 /// `$f::<O, D>(...)` (awaited after `async`) for the obstacle kind `O` of a world of `$dim` axes: the plane
 /// (2) or space (3).
@@ -27,6 +28,7 @@ macro_rules! in_dimension {
 mod bench;
 mod fleet;
 mod merge;
+mod promise;
 mod run;
 mod world;
 
@@ -58,6 +60,9 @@ enum SimCommand {
     Fleet(fleet::Args),
     /// Generates a world from a seed, or checks a world file.
     World(world::Args),
+    /// Each served row's promise in closed loop through `Track`: the largest error from starts across its
+    /// certified set, against the worst case of the served gradient and random planners, beside its bound.
+    Promise(promise::Args),
 }
 
 /// Settings every simulated run shares.
@@ -203,6 +208,7 @@ pub async fn run_command(server: &Server, args: Args, json_mode: bool) -> anyhow
         SimCommand::Merge(args) => merge::run(args, json_mode),
         SimCommand::Fleet(args) => fleet::run(&server.connect().await?, args, json_mode).await,
         SimCommand::World(args) => world::run(&server.connect().await?, args, json_mode).await,
+        SimCommand::Promise(args) => promise::run(&server.connect().await?, args, json_mode).await,
     }
 }
 
