@@ -132,6 +132,11 @@ impl PromiseCheck {
         let verification = row.verification.as_ref();
         let step = verification.map_or(0.01, |v| v.step);
         let horizon = options.horizon.or(verification.map(|v| v.horizon)).unwrap_or(self.info.horizon);
+        if !(horizon.is_finite() && horizon > 0.0 && step.is_finite() && step > 0.0) {
+            return Err(PromiseError::Setup(format!(
+                "the horizon must be a positive number of seconds and the step positive; got horizon {horizon}, step {step}"
+            )));
+        }
         let mut rng = StdRng::seed_from_u64(options.seed ^ beta.to_bits());
         let starts = self.starts(&row, options, &mut rng).await?;
         let mut result = RowPromise {

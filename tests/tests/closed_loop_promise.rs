@@ -19,6 +19,12 @@ async fn from_starts_across_each_certified_set_the_error_stays_within_the_bound(
     for info in trained {
         let check = PromiseCheck::new(client.clone(), model_ref(&info.name, info.version)).await.unwrap();
         let rows = check.rows();
+        // Settings it cannot run with are refused, naming what is wrong.
+        let off_table = check.row(rows[0].beta + 1e-3, &options).await.expect_err("refused");
+        assert!(off_table.to_string().contains("no row at beta"), "{off_table}");
+        let backwards = PromiseOptions { horizon: Some(-1.0), ..options.clone() };
+        let refused = check.row(rows[0].beta, &backwards).await.expect_err("refused");
+        assert!(refused.to_string().contains("horizon must be a positive number"), "{refused}");
         for beta in [rows[0].beta, rows[rows.len() / 2].beta, rows[rows.len() - 1].beta] {
             let row = check.row(beta, &options).await.unwrap();
             eprintln!(
