@@ -14,6 +14,7 @@ use fastrack_valuefn::system::{for_bundle, AffineSystem};
 use rand::rngs::StdRng;
 use rand::{Rng, SeedableRng};
 use serde::Serialize;
+use std::sync::Arc;
 
 /// Points tried along each ray from the centre to the domain's edge.
 const RAY_POINTS: usize = 48;
@@ -21,6 +22,8 @@ const RAY_POINTS: usize = 48;
 const CENTRE_HEADINGS: usize = 24;
 /// Speeds tried for it, as multiples of the row's `beta`.
 const CENTRE_SPEEDS: [f64; 6] = [0.5, 0.75, 1.0, 1.25, 1.5, 2.0];
+/// The step of a row with no verification record (s).
+const UNVERIFIED_STEP: f64 = 0.01;
 /// Mean time between a random planner's switches (s).
 const MEAN_DWELL: f64 = 1.0;
 
@@ -98,7 +101,7 @@ pub struct PromiseCheck {
     client: FastrackClient,
     model: pb::ModelRef,
     info: pb::ModelInfo,
-    system: AffineSystem,
+    system: Arc<AffineSystem>,
 }
 
 impl PromiseCheck {
@@ -108,7 +111,7 @@ impl PromiseCheck {
         let system = for_bundle(&info.system, info.params.len()).ok_or_else(|| {
             PromiseError::Setup(format!("the model's system `{}` is not one this check knows", info.system))
         })?;
-        Ok(Self { client, model, info, system })
+        Ok(Self { client, model, info, system: Arc::new(system) })
     }
 
     /// The model's served rows.
@@ -130,7 +133,7 @@ impl PromiseCheck {
             .ok_or_else(|| PromiseError::Setup(format!("the model has no row at beta {beta}")))?
             .clone();
         let verification = row.verification.as_ref();
-        let step = verification.map_or(0.01, |v| v.step);
+        let step = verification.map_or(UNVERIFIED_STEP, |v| v.step);
         let horizon = options.horizon.or(verification.map(|v| v.horizon)).unwrap_or(self.info.horizon);
         if !(horizon.is_finite() && horizon > 0.0 && step.is_finite() && step > 0.0) {
             return Err(PromiseError::Setup(format!(
@@ -206,7 +209,7 @@ impl PromiseCheck {
         let n = self.system.n_state();
         let half_widths: Vec<f64> =
             self.info.state.iter().map(|d| d.bounds.as_ref().map_or(1.0, |b| 0.5 * (b.max - b.min))).collect();
-        let rays: Vec<Vec<f64>> = (1..options.starts.max(1))
+        let rays: Vec<Vec<f64>> = (1..options.starts)
             .map(|_| {
                 let d: Vec<f64> = (0..n).map(|_| rng.random::<f64>() * 2.0 - 1.0).collect();
                 let norm = d.iter().map(|x| x * x).sum::<f64>().sqrt().max(1e-12);
@@ -276,7 +279,7 @@ struct RolledOut {
 struct Rollout {
     client: FastrackClient,
     model: pb::ModelRef,
-    system: AffineSystem,
+    system: Arc<AffineSystem>,
     planner_dim: usize,
     row: pb::TebRow,
     step: f64,
@@ -285,8 +288,9 @@ struct Rollout {
 }
 
 impl Rollout {
-    /// What the rollout found, or none when the server does not place the start in the row's set. The stream is kept at the row by a sensed obstacle at twice its
-    /// bound; the planner's own state stays at the origin, so the tracker's state is the relative state.
+    /// What the rollout found, or none when the server does not place the start in the row's set. The stream
+    /// is kept at the row by a sensed obstacle at twice its bound; the planner's own state stays at the
+    /// origin, so the tracker's state is the relative state.
     async fn run(self, start: Vec<f64>, mut planner: PlannerPolicy) -> Result<Option<RolledOut>, PromiseError> {
         let (system, beta) = (&self.system, self.row.beta);
         let params = vec![beta; system.params.len()];
