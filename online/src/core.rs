@@ -6,8 +6,8 @@
 //! measures `d_obs`, applies queryPlannerControl, replans when needed, and returns a [`Step`] whose
 //! [`Step::query`] says what it needs to know: a [`Query::Tick`] (the value, membership and control at the
 //! relative state of one planner state, the one question per step on the common branch) or a
-//! [`Query::Batch`] (the same for several relative states: the reset candidates, or the held state under
-//! `beta_old`). Its [`Step::answer`] returns either the next question or the step's [`StepReport`]; the core
+//! [`Query::Batch`] (the same for several relative states under a given `beta`: the reset candidates, the held
+//! state under `beta_old`, or any state of a drop tried below the rule's row). Its [`Step::answer`] returns either the next question or the step's [`StepReport`]; the core
 //! changes only when the report is returned. A driver answers over the network (`online_loop::OnlineLoop`,
 //! over a `Track` stream) or in process.
 
@@ -37,7 +37,8 @@ pub enum Branch {
     Reset,
     /// The planner waits where it is (a planner at rest obeys every speed bound), `beta_old` and its bound stay
     /// in force, and the step's `beta` is tried again at the next step: on a drop, when no free planner state
-    /// within `dTEBmax` of the tracker puts `s - Q p` in the smaller set; on a rise or an advance, when one
+    /// within `dTEBmax` of the tracker puts `s - Q p` in the smaller set (a drop that has held for
+    /// [`DROP_PATIENCE`] is tried one row slower at each further step); on a rise or an advance, when one
     /// period along the raw path would bring the planner within the bound of a sensed obstacle.
     Hold,
 }
@@ -73,6 +74,12 @@ pub struct ModelView {
 /// Share of the certificate horizon after which a loop whose relative state stayed outside the certified
 /// set of the row in force moves the planner back into it.
 pub const REANCHOR_SHARE: f64 = 0.5;
+
+/// How long a drop may hold (s) before it is tried one row slower at each further step: a hold waits for the
+/// tracker to move into the smaller set, and a tracker that settles outside it (at rest beside a planner that
+/// cannot reach it) would wait for ever. Any row below the rule's keeps its smaller bound clear, so a slower
+/// drop is as safe.
+pub const DROP_PATIENCE: f64 = 2.0;
 
 /// Reset candidates a reset asks about before the planner holds, unless the settings say otherwise.
 pub const DEFAULT_RESET_CANDIDATES: usize = 256;
@@ -254,6 +261,8 @@ pub struct LoopCore<O, const D: usize> {
     settings: CoreSettings<D>,
     beta_query: f64,
     certificate_age: f64,
+    /// How long the drop under way has held (s): 0 unless the last steps were drops that held.
+    drop_held: f64,
     replan_flag: bool,
     planner: Point<D>,
     raw_path: VecDeque<Point<D>>,
@@ -288,6 +297,9 @@ pub struct Step<const D: usize> {
     planner_clearance: Option<f64>,
     beta_old: f64,
     speed: PlannerSpeed,
+    /// The drop is tried below the rule's row (after [`DROP_PATIENCE`]): the server's `Track` tick would
+    /// choose the rule's row, so every question is a batch under the step's own `beta`.
+    slower_than_rule: bool,
     replanned: bool,
     round_trips: usize,
     stage: Stage<D>,
@@ -321,6 +333,7 @@ impl<O: Obstacle<D>, const D: usize> LoopCore<O, D> {
             beta_query: beta_u,
             // The robot starts at rest on the planner.
             certificate_age: 0.0,
+            drop_held: 0.0,
             replan_flag: true,
             planner: start,
             raw_path: VecDeque::new(),
@@ -412,6 +425,8 @@ impl<O: Obstacle<D>, const D: usize> LoopCore<O, D> {
             Some(c) => planner_rule(&self.view.speeds, c),
             None => query_planner_control(&self.view.speeds, d_obs),
         };
+        let rule_row = speed.row;
+        let speed = if speed.beta < beta_old { self.slower_after_patience(speed) } else { speed };
         // The flag stays set until a path is planned: a step that failed to plan plans again next time.
         self.replan_flag |= newly_sensed;
         let replanned = self.replan_flag;
@@ -435,6 +450,7 @@ impl<O: Obstacle<D>, const D: usize> LoopCore<O, D> {
             planner_clearance,
             beta_old,
             speed,
+            slower_than_rule: speed.row < rule_row,
             replanned,
             round_trips: 1,
             stage: Stage::Candidates { free: Vec::new() },
@@ -487,7 +503,11 @@ impl<O: Obstacle<D>, const D: usize> LoopCore<O, D> {
             step.stage = Stage::Advance { p_next, ahead, rising: speed.beta > beta_old };
             p_next
         };
-        step.query = Query::Tick { tracker: tracker.to_vec(), planner: p, d_obs, planner_clearance, beta: speed.beta };
+        step.query = if step.slower_than_rule {
+            Query::Batch { states: self.relative_state(tracker, p), beta: speed.beta }
+        } else {
+            Query::Tick { tracker: tracker.to_vec(), planner: p, d_obs, planner_clearance, beta: speed.beta }
+        };
         Ok(step)
     }
 
@@ -564,6 +584,19 @@ impl<O: Obstacle<D>, const D: usize> LoopCore<O, D> {
         least
     }
 
+    /// The drop's row: the rule's own, or, once the drop has held for [`DROP_PATIENCE`], one row slower for
+    /// each further step it has held (down to `beta_l`).
+    fn slower_after_patience(&self, speed: PlannerSpeed) -> PlannerSpeed {
+        let past = self.drop_held - DROP_PATIENCE;
+        if past < -1e-9 {
+            return speed;
+        }
+        let rows_down = 1 + (past / self.settings.control_period + 1e-9).floor() as usize;
+        let row = speed.row.saturating_sub(rows_down);
+        let chosen = self.view.speeds[row];
+        PlannerSpeed { beta: chosen.beta, row, dteb_radius: chosen.bound, ..speed }
+    }
+
     /// The table's fastest `beta`.
     fn beta_u(&self) -> f64 {
         self.view.speeds.last().map_or(0.0, |row| row.beta)
@@ -619,6 +652,8 @@ impl<O: Obstacle<D>, const D: usize> LoopCore<O, D> {
         // Every branch that changes the row in force puts the relative state in the new row's set, so the age
         // counts from there; on the others the row stays.
         self.certificate_age = if answer.in_set { 0.0 } else { self.certificate_age + self.settings.control_period };
+        let drop_holds = branch == Branch::Hold && step.speed.beta < step.beta_old;
+        self.drop_held = if drop_holds { self.drop_held + self.settings.control_period } else { 0.0 };
         Progress::Done(StepReport {
             d_obs: step.d_obs,
             beta_old: step.beta_old,
@@ -687,10 +722,16 @@ impl<const D: usize> Step<D> {
             Stage::Candidates { free } => {
                 // Inside the set and the trained domain: a membership read off an extrapolated value is no
                 // reset.
-                let chosen = free.into_iter().zip(answers).find_map(|(p, a)| (a.in_set && a.in_domain).then_some(p));
-                let Some(candidate) = chosen else {
+                let chosen = free.into_iter().zip(answers).find(|(_, a)| a.in_set && a.in_domain);
+                let Some((candidate, answer)) = chosen else {
                     return core.hold(self).map(Progress::Ask);
                 };
+                if self.slower_than_rule {
+                    // Below the rule's row the batch that found the candidate answers for it.
+                    core.raw_path.clear();
+                    core.replan_flag = true;
+                    return Ok(core.done(self, Branch::Reset, candidate, answer, None));
+                }
                 self.query = Query::Tick {
                     tracker: self.tracker.clone(),
                     planner: candidate,
@@ -823,15 +864,29 @@ mod tests {
         tick_in_set: bool,
         batch_in_set: bool,
     ) -> (StepReport<2>, Vec<Query<2>>) {
+        run_with(core, tracker, sensed, |query| match query {
+            Query::Tick { .. } => tick_in_set,
+            Query::Batch { .. } => batch_in_set,
+        })
+    }
+
+    /// Runs a step to its end, every state of a question in the set when `in_set` says so of the question.
+    fn run_with(
+        core: &mut LoopCore<PlaneObstacle, 2>,
+        tracker: &[f64],
+        sensed: &[PlaneObstacle],
+        in_set: impl Fn(&Query<2>) -> bool,
+    ) -> (StepReport<2>, Vec<Query<2>>) {
         let mut step = core.begin(tracker, sensed, &mut Straight).unwrap();
         let mut asked = Vec::new();
         loop {
             let query = step.query().clone();
+            let inside = in_set(&query);
             let answers = match &query {
                 Query::Tick { tracker, planner, .. } => {
-                    vec![answer(core.relative_state(tracker, *planner), tick_in_set)]
+                    vec![answer(core.relative_state(tracker, *planner), inside)]
                 }
-                Query::Batch { states, .. } => states.chunks(4).map(|r| answer(r.to_vec(), batch_in_set)).collect(),
+                Query::Batch { states, .. } => states.chunks(4).map(|r| answer(r.to_vec(), inside)).collect(),
             };
             asked.push(query);
             match step.answer(core, answers).unwrap() {
@@ -1008,6 +1063,54 @@ mod tests {
         assert_eq!(report.planner, planner, "the planner waits");
         assert!(matches!(asked.last(), Some(Query::Batch { beta, .. }) if *beta == 1.5));
         assert_eq!(core.beta_in_force(), 1.5, "beta_old stays in force");
+    }
+
+    #[test]
+    fn a_drop_that_held_for_the_patience_is_tried_one_row_slower_at_each_step() {
+        let mut core = core();
+        run(&mut core, &[0.0; 4], &[], true, true);
+        // 2.5 m from the tracker: the rule drops from 1.5 to 1.0, whose set holds no state; 0.5's holds all.
+        const AHEAD: PlaneObstacle = PlaneObstacle::Circle { center: [3.1, 0.0], radius: 0.5 };
+        let slowest_holds = |query: &Query<2>| match query {
+            Query::Tick { beta, .. } | Query::Batch { beta, .. } => *beta <= 0.5,
+        };
+        let planner = core.planner();
+        let holds = (DROP_PATIENCE / 0.1).round() as usize;
+        for _ in 0..holds {
+            let (report, asked) = run_with(&mut core, &[0.1, 0.0, 0.0, 0.0], &[AHEAD], slowest_holds);
+            assert_eq!((report.branch, report.beta_query, report.planner), (Branch::Hold, 1.5, planner));
+            assert!(matches!(asked[0], Query::Tick { beta: 1.0, .. }), "the rule's row first: {asked:?}");
+        }
+        let (report, asked) = run_with(&mut core, &[0.1, 0.0, 0.0, 0.0], &[AHEAD], slowest_holds);
+        assert_eq!((report.branch, report.beta_old, report.beta_query), (Branch::Keep, 1.5, 0.5));
+        // The server's tick would choose the rule's row: below it, the step asks in a batch.
+        assert!(matches!(asked[..], [Query::Batch { beta: 0.5, .. }]), "{asked:?}");
+        assert_eq!(core.beta_in_force(), 0.5);
+        // The patience counts afresh: the next drop starts at the rule's own row.
+        run(&mut core, &[0.0; 4], &[], true, true);
+        let (_, asked) = run_with(&mut core, &[0.1, 0.0, 0.0, 0.0], &[AHEAD], slowest_holds);
+        assert!(matches!(asked[0], Query::Tick { beta: 1.0, .. }), "{asked:?}");
+    }
+
+    #[test]
+    fn a_drop_below_the_rules_row_resets_on_the_batch_that_found_the_candidate() {
+        let mut core = core();
+        run(&mut core, &[0.0; 4], &[], true, true);
+        const AHEAD: PlaneObstacle = PlaneObstacle::Circle { center: [3.1, 0.0], radius: 0.5 };
+        // p* lies in no set; of the reset candidates, only 0.5's set holds some.
+        let candidates_under_slowest = |query: &Query<2>| match query {
+            Query::Tick { .. } => false,
+            Query::Batch { states, beta } => states.len() > 4 && *beta <= 0.5,
+        };
+        for _ in 0..(DROP_PATIENCE / 0.1).round() as usize {
+            let (report, _) = run_with(&mut core, &[0.1, 0.0, 0.0, 0.0], &[AHEAD], candidates_under_slowest);
+            assert_eq!(report.branch, Branch::Hold);
+        }
+        let (report, asked) = run_with(&mut core, &[0.1, 0.0, 0.0, 0.0], &[AHEAD], candidates_under_slowest);
+        assert_eq!((report.branch, report.beta_query, report.in_teb), (Branch::Reset, 0.5, true));
+        assert!(matches!(asked[..], [Query::Batch { beta: 0.5, .. }, Query::Batch { beta: 0.5, .. }]), "{asked:?}");
+        assert_eq!(report.round_trips, 2, "p*, then the candidates: no tick");
+        assert!(core.replan_flag, "a reset plans again");
     }
 
     #[test]

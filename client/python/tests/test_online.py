@@ -33,6 +33,7 @@ from fastrack.geometry import (
     segment_is_free,
 )
 from fastrack.online import (
+    DROP_PATIENCE,
     GoalBlocked,
     GridAStar,
     LoopSetupError,
@@ -389,6 +390,30 @@ def test_a_fast_tracker_outside_every_smaller_set_holds_until_it_slows(client: f
         slow = [float(step.planner[0]), float(step.planner[1]), ALONG_X, 1.0]
         after = loop.step(slow, [obstacle])
         assert after.branch == "keep" and after.beta_query < after.beta_old and after.in_teb, after
+
+
+def test_a_drop_that_held_for_the_patience_is_tried_one_row_slower_at_each_step(client: fastrack.Client) -> None:
+    with online(client) as loop:
+        # At 1.5 m/s the tracker lies outside beta 0.9's set even on its planner: the drop to 0.9 holds.
+        fast = [0.0, 0.0, ALONG_X, 1.5]
+        assert not held_on_its_planner(client, fast, 0.9)
+        first = loop.step(fast)
+        # 2.9 m from the tracker: half of it fits beta 0.9's bound, not 0.95's.
+        obstacle = Circle((0.0, 3.4), 0.5)
+        for _ in range(round(DROP_PATIENCE / 0.1)):
+            step = loop.step(fast, [obstacle])
+            assert step.branch == "hold" and step.beta_query == first.beta_query, step
+        # One row slower (0.85), asked in batches: the server's tick would choose the rule's 0.9.
+        step = loop.step(fast, [obstacle])
+        assert step.branch in ("keep", "reset") and step.beta_query == 0.85 and step.in_teb, step
+        assert step.d_obs is not None and step.dteb_radius < step.d_obs / 2, "a slower row's bound fits as well"
+        np.testing.assert_array_equal(step.control, held_control(client, step))
+
+
+def held_on_its_planner(client: fastrack.Client, tracker: list[float], beta: float) -> bool:
+    """Whether ``beta``'s certified set holds the tracker with no position error."""
+    answer = client.tracking_control(MODEL, [[0.0, 0.0, *tracker[2:]]], [[beta]], out_of_domain="flag")
+    return bool(answer.in_teb[0])
 
 
 def test_bad_tracker_states_and_settings_are_clear_errors(client: fastrack.Client) -> None:

@@ -49,7 +49,7 @@ import heapq
 import math
 from collections import deque
 from collections.abc import Iterable, Sequence
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from types import TracebackType
 from typing import Literal, Protocol
 
@@ -159,6 +159,29 @@ def speed_rows(info: models_pb2.ModelInfo) -> list[SpeedRow]:
 
 
 @dataclass(frozen=True)
+class _Answer:
+    """The model's answer at one relative state, read off a ``TrackingControl`` batch (a tick's reply carries
+    the same fields)."""
+
+    relative_state: npt.NDArray[np.float64]
+    value: float
+    in_teb: bool
+    in_domain: bool
+    control: npt.NDArray[np.float64]
+
+    @staticmethod
+    def of_batch(batch: TrackingControl, i: int, relative_state: Sequence[float]) -> _Answer:
+        """Item ``i`` of ``batch``, asked at ``relative_state``."""
+        return _Answer(
+            relative_state=np.array(relative_state, dtype=np.float64),
+            value=float(batch.values[i]),
+            in_teb=bool(batch.in_teb[i]),
+            in_domain=bool(batch.in_domain[i]),
+            control=np.asarray(batch.controls[i], dtype=np.float64),
+        )
+
+
+@dataclass(frozen=True)
 class PlannerSpeed:
     """What queryPlannerControl chose."""
 
@@ -220,6 +243,11 @@ bound ahead keeps that bound clear as well)."""
 REANCHOR_SHARE = 0.5
 """Share of the certificate horizon after which a loop whose relative state stayed outside the certified set of
 the row in force moves the planner back into it (a reset under that row, or a hold)."""
+
+DROP_PATIENCE = 2.0
+"""How long a drop may hold (s) before it is tried one row slower at each further step: a hold waits for the
+tracker to move into the smaller set, and a tracker that settles outside it would wait for ever. Any row below
+the rule's keeps its smaller bound clear, so a slower drop is as safe."""
 
 
 def certificate_horizon(info: models_pb2.ModelInfo) -> float | None:
@@ -590,6 +618,8 @@ class OnlineLoop:
         self._certificate_horizon = certificate_horizon(info)
         # The robot starts at rest on the planner.
         self._certificate_age = 0.0
+        # How long the drop under way has held (s).
+        self._drop_held = 0.0
         self._replan_flag = True
         self._planner_state: Point = self._start
         self._raw_path: deque[Point] = deque()
@@ -678,11 +708,14 @@ class OnlineLoop:
                 )
         newly_sensed = remember(self._obstacles, sensed)
         try:
-            return self._decide(tracker, newly_sensed)
+            report = self._decide(tracker, newly_sensed)
         except TableMismatch:
             self._speeds = speed_rows(self.client.get_model(self.model, self.version))
             # The new table's sTEB may differ: plan again with it.
-            return self._decide(tracker, True)
+            report = self._decide(tracker, True)
+        if report.branch != "hold":
+            self._drop_held = 0.0
+        return report
 
     def _decide(self, tracker: list[float], newly_sensed: bool) -> StepReport:
         position = self._position(tracker)
@@ -693,6 +726,11 @@ class OnlineLoop:
             speed = query_planner_control(self._speeds, d_obs)
         else:
             speed = planner_rule(self._speeds, planner_clearance)
+        rule_row = speed.row
+        if speed.beta < beta_old:
+            speed = self._slower_after_patience(speed)
+        # Below the rule's row the server's tick would choose the rule's row: ask in batches instead.
+        below_rule = speed.row < rule_row
         # The flag stays set until a path is planned: a step that failed to plan plans again next time.
         self._replan_flag = self._replan_flag or newly_sensed
         replanned = self._replan_flag
@@ -708,22 +746,31 @@ class OnlineLoop:
             return self._reanchor(tracker, position, d_obs, beta_old, speed, replanned)
         if speed.beta < beta_old:
             index, p_star = self._closest_path_state(position)
-            reply = None
+            reply: TrackReply | _Answer | None = None
             # A planner kept at p* must keep the smaller bound clear of the sensed obstacles.
             if clearance(self._obstacles, p_star) > speed.dteb_radius:
                 round_trips += 1
-                reply = self._tick(tracker, p_star, d_obs, planner_clearance, speed.beta)
+                if below_rule:
+                    reply = self._batch_of_one(tracker, p_star, speed.beta)
+                else:
+                    reply = self._tick(tracker, p_star, d_obs, planner_clearance, speed.beta)
             if reply is not None and reply.in_teb:
                 for _ in range(index):
                     self._raw_path.popleft()
                 branch, p_next = "keep", p_star
             else:
-                candidate, calls = self._reset_point(tracker, position, speed)
+                row = SpeedRow(speed.beta, speed.dteb_radius)
+                found, calls = self._candidates(tracker, position, row, speed.steb_radius)
                 round_trips += calls
-                if candidate is None:
+                if found is None:
                     return self._hold(tracker, d_obs, beta_old, speed, replanned, round_trips)
-                round_trips += 1
-                p_next, reply = candidate, self._tick(tracker, candidate, d_obs, planner_clearance, speed.beta)
+                p_next, batch, i = found
+                if below_rule:
+                    # The batch that found the candidate answers for it.
+                    reply = _Answer.of_batch(batch, i, self._relative_state(tracker, p_next))
+                else:
+                    round_trips += 1
+                    reply = self._tick(tracker, p_next, d_obs, planner_clearance, speed.beta)
                 self._raw_path.clear()
                 self._replan_flag = True
                 branch = "reset"
@@ -767,6 +814,16 @@ class OnlineLoop:
             round_trips=round_trips,
             certificate_age=self._age(reply.in_teb),
         )
+
+    def _slower_after_patience(self, speed: PlannerSpeed) -> PlannerSpeed:
+        """The drop's row: the rule's own, or, once the drop has held for :data:`DROP_PATIENCE`, one row slower
+        for each further step it has held (down to ``beta_l``)."""
+        past = self._drop_held - DROP_PATIENCE
+        if past < -1e-9:
+            return speed
+        row = max(speed.row - 1 - math.floor(past / self.control_period + 1e-9), 0)
+        chosen = self._speeds[row]
+        return replace(speed, beta=chosen.beta, row=row, dteb_radius=chosen.bound)
 
     def _age(self, in_teb: bool) -> float:
         """The certificate's age after a step whose relative state lies in the set of the row now in force
@@ -847,12 +904,6 @@ class OnlineLoop:
                 best, best_distance = (k, p), distance
         return best
 
-    def _reset_point(self, tracker: list[float], position: Point, speed: PlannerSpeed) -> tuple[Point | None, int]:
-        """A free planner state with ``s - Q p`` in the certified set of ``beta_query`` and the trained domain,
-        if there is one among the candidates (:meth:`_candidates`). Also returns the calls made."""
-        found, calls = self._candidates(tracker, position, SpeedRow(speed.beta, speed.dteb_radius), speed.steb_radius)
-        return (found[0] if found else None), calls
-
     def _candidates(
         self, tracker: list[float], position: Point, row: SpeedRow, steb_radius: float
     ) -> tuple[tuple[Point, TrackingControl, int] | None, int]:
@@ -928,11 +979,13 @@ class OnlineLoop:
         round_trips: int,
     ) -> StepReport:
         """The hold branch: the planner waits at its state, and ``u*`` is read under ``beta_old`` (the row
-        answering for it in the current table), whose bound stays in force."""
+        answering for it in the current table), whose bound stays in force. A drop's hold adds to how long the
+        drop has held."""
         index = row_for(self._speeds, beta_old)
         if index is None:
             raise TableMismatch(local=beta_old, server=self._speeds[-1].beta)
         row = self._speeds[index]
+        self._drop_held = self._drop_held + self.control_period if speed.beta < beta_old else 0.0
         r = self._relative_state(tracker, self._planner_state)
         params = np.full((1, self._n_params), row.beta)
         answer = self.client.tracking_control(self.model, [r], params, out_of_domain="flag", version=self.version)
@@ -992,6 +1045,13 @@ class OnlineLoop:
             start, left = to, left - length
         return least
 
+    def _batch_of_one(self, tracker: list[float], p: Point, beta: float) -> _Answer:
+        """The model's answer for planner state ``p`` under ``beta``, in a ``TrackingControl`` batch of one."""
+        r = self._relative_state(tracker, p)
+        params = np.full((1, self._n_params), beta)
+        answer = self.client.tracking_control(self.model, [r], params, out_of_domain="flag", version=self.version)
+        return _Answer.of_batch(answer, 0, r)
+
     def _tick(
         self, tracker: list[float], p: Point, d_obs: float | None, planner_clearance: float | None, beta: float
     ) -> TrackReply:
@@ -1015,6 +1075,7 @@ class OnlineLoop:
 
 
 __all__ = [
+    "DROP_PATIENCE",
     "Branch",
     "GoalBlocked",
     "GridAStar",
