@@ -31,7 +31,7 @@ pub(super) struct Args {
     #[arg(long, default_value_t = 20)]
     worlds: u64,
     /// Methods, comma separated (pf, pf-fast, pf-planner, f-low, f-high, mf, mf-quick, mppi).
-    #[arg(long, value_delimiter = ',', default_value = "f-low,f-high,mf,pf,mppi")]
+    #[arg(long, value_delimiter = ',', default_value = "f-low,f-high,mf,mf-quick,pf,pf-fast,pf-planner,mppi")]
     methods: Vec<String>,
     /// Runs at once (each its own connection's stream or calls); decision latencies then include the
     /// others' load on the machine.

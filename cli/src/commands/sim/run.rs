@@ -21,8 +21,10 @@ pub(super) struct Args {
     /// Seed of the generated world (and of the method's randomness).
     #[arg(long, default_value_t = 1)]
     seed: u64,
-    /// pf, pf-fast, pf-planner, f-low, f-high, mf, mf-quick or mppi.
-    #[arg(long, default_value = "pf")]
+    /// pf-planner (Parametric FaSTrack under the planner rule on the fastest raw path, the fastest on every
+    /// world family), pf (the paper's rule on the shortest raw path), pf-fast, f-low, f-high, mf, mf-quick or
+    /// mppi.
+    #[arg(long, default_value = "pf-planner")]
     method: String,
     /// Where the trajectory figure goes (a second figure, over time, goes beside it; in space the view from
     /// above goes here, the side view beside it, and a page to turn in a browser, `.html`).
