@@ -7,9 +7,9 @@
 //! [`Step::query`] says what it needs to know: a [`Query::Tick`] (the value, membership and control at the
 //! relative state of one planner state, the one question per step on the common branch) or a
 //! [`Query::Batch`] (the same for several relative states under a given `beta`: the reset candidates, the held
-//! state under `beta_old`, or any state of a drop tried below the rule's row). Its [`Step::answer`] returns either the next question or the step's [`StepReport`]; the core
-//! changes only when the report is returned. A driver answers over the network (`online_loop::OnlineLoop`,
-//! over a `Track` stream) or in process.
+//! state under `beta_old`, or any state of a drop tried below the rule's row). Its [`Step::answer`] returns
+//! either the next question or the step's [`StepReport`]; the core changes only when the report is returned.
+//! A driver answers over the network (`online_loop::OnlineLoop`, over a `Track` stream) or in process.
 
 use crate::geometry::{clearance, inside, lerp, norm, remember, sub, Obstacle, Point};
 use crate::raw_path::{advance_along, PlanError, PlanRequest, RawPathPlanner};

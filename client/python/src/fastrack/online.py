@@ -908,9 +908,9 @@ class OnlineLoop:
         self, tracker: list[float], position: Point, row: SpeedRow, steb_radius: float
     ) -> tuple[tuple[Point, TrackingControl, int] | None, int]:
         """The first free reset candidate (inside the workspace, farther than the sTEB and the row's bound from
-        every sensed obstacle) with ``s - Q p`` in the
-        certified set of ``row`` and the trained domain, with the batch's answer and its index there: the tracker's own position first, then points
-        of :func:`reset_candidates` in the disc of the row's radius around it, the free ones asked about in one
+        every sensed obstacle) with ``s - Q p`` in the certified set of ``row`` and the trained domain, with the
+        batch's answer and its index there: the tracker's own position first, then points of
+        :func:`reset_candidates` in the disc of the row's radius around it, the free ones asked about in one
         ``TrackingControl`` batch. Also returns the calls made."""
         candidates = reset_candidates(position, row.bound, self.reset_candidates)
         keep = max(steb_radius, row.bound)
