@@ -1065,48 +1065,53 @@ mod tests {
         assert_eq!(core.beta_in_force(), 1.5, "beta_old stays in force");
     }
 
+    /// 2.5 m from the tracker at `NEAR_AHEAD`: the rule drops from 1.5 to 1.0.
+    const AHEAD: PlaneObstacle = PlaneObstacle::Circle { center: [3.1, 0.0], radius: 0.5 };
+    const NEAR_AHEAD: [f64; 4] = [0.1, 0.0, 0.0, 0.0];
+
+    /// Steps at `NEAR_AHEAD` for [`DROP_PATIENCE`] (control period 0.1 s), each a hold under 1.5 that asks
+    /// the rule's row (1.0) first.
+    fn hold_for_the_patience(core: &mut LoopCore<PlaneObstacle, 2>, in_set: impl Fn(&Query<2>) -> bool + Copy) {
+        let planner = core.planner();
+        for _ in 0..(DROP_PATIENCE / 0.1).round() as usize {
+            let (report, asked) = run_with(core, &NEAR_AHEAD, &[AHEAD], in_set);
+            assert_eq!((report.branch, report.beta_query, report.planner), (Branch::Hold, 1.5, planner));
+            assert!(matches!(asked[0], Query::Tick { beta: 1.0, .. }), "the rule's row first: {asked:?}");
+        }
+    }
+
     #[test]
     fn a_drop_that_held_for_the_patience_is_tried_one_row_slower_at_each_step() {
         let mut core = core();
         run(&mut core, &[0.0; 4], &[], true, true);
-        // 2.5 m from the tracker: the rule drops from 1.5 to 1.0, whose set holds no state; 0.5's holds all.
-        const AHEAD: PlaneObstacle = PlaneObstacle::Circle { center: [3.1, 0.0], radius: 0.5 };
+        // 1.0's set holds no state; 0.5's holds all.
         let slowest_holds = |query: &Query<2>| match query {
             Query::Tick { beta, .. } | Query::Batch { beta, .. } => *beta <= 0.5,
         };
-        let planner = core.planner();
-        let holds = (DROP_PATIENCE / 0.1).round() as usize;
-        for _ in 0..holds {
-            let (report, asked) = run_with(&mut core, &[0.1, 0.0, 0.0, 0.0], &[AHEAD], slowest_holds);
-            assert_eq!((report.branch, report.beta_query, report.planner), (Branch::Hold, 1.5, planner));
-            assert!(matches!(asked[0], Query::Tick { beta: 1.0, .. }), "the rule's row first: {asked:?}");
-        }
-        let (report, asked) = run_with(&mut core, &[0.1, 0.0, 0.0, 0.0], &[AHEAD], slowest_holds);
+        hold_for_the_patience(&mut core, slowest_holds);
+        let (report, asked) = run_with(&mut core, &NEAR_AHEAD, &[AHEAD], slowest_holds);
         assert_eq!((report.branch, report.beta_old, report.beta_query), (Branch::Keep, 1.5, 0.5));
         // The server's tick would choose the rule's row: below it, the step asks in a batch.
         assert!(matches!(asked[..], [Query::Batch { beta: 0.5, .. }]), "{asked:?}");
         assert_eq!(core.beta_in_force(), 0.5);
-        // The patience counts afresh: the next drop starts at the rule's own row.
-        run(&mut core, &[0.0; 4], &[], true, true);
-        let (_, asked) = run_with(&mut core, &[0.1, 0.0, 0.0, 0.0], &[AHEAD], slowest_holds);
-        assert!(matches!(asked[0], Query::Tick { beta: 1.0, .. }), "{asked:?}");
+        // The patience counts afresh: far from the obstacle the loop rises to 1.5, and the next drop holds
+        // under the rule's own row again.
+        let (report, _) = run(&mut core, &[-20.0, 0.0, 0.0, 0.0], &[], true, true);
+        assert_eq!((report.branch, report.beta_query), (Branch::Advance, 1.5));
+        hold_for_the_patience(&mut core, slowest_holds);
     }
 
     #[test]
     fn a_drop_below_the_rules_row_resets_on_the_batch_that_found_the_candidate() {
         let mut core = core();
         run(&mut core, &[0.0; 4], &[], true, true);
-        const AHEAD: PlaneObstacle = PlaneObstacle::Circle { center: [3.1, 0.0], radius: 0.5 };
         // p* lies in no set; of the reset candidates, only 0.5's set holds some.
         let candidates_under_slowest = |query: &Query<2>| match query {
             Query::Tick { .. } => false,
             Query::Batch { states, beta } => states.len() > 4 && *beta <= 0.5,
         };
-        for _ in 0..(DROP_PATIENCE / 0.1).round() as usize {
-            let (report, _) = run_with(&mut core, &[0.1, 0.0, 0.0, 0.0], &[AHEAD], candidates_under_slowest);
-            assert_eq!(report.branch, Branch::Hold);
-        }
-        let (report, asked) = run_with(&mut core, &[0.1, 0.0, 0.0, 0.0], &[AHEAD], candidates_under_slowest);
+        hold_for_the_patience(&mut core, candidates_under_slowest);
+        let (report, asked) = run_with(&mut core, &NEAR_AHEAD, &[AHEAD], candidates_under_slowest);
         assert_eq!((report.branch, report.beta_query, report.in_teb), (Branch::Reset, 0.5, true));
         assert!(matches!(asked[..], [Query::Batch { beta: 0.5, .. }, Query::Batch { beta: 0.5, .. }]), "{asked:?}");
         assert_eq!(report.round_trips, 2, "p*, then the candidates: no tick");
