@@ -7,6 +7,7 @@
 
 #![warn(missing_docs)]
 
+mod cell_astar;
 pub mod core;
 pub mod fastest_path;
 pub mod geometry;

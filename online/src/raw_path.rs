@@ -1,6 +1,6 @@
 //! Raw-path planners: what the online loop asks for a path around the sensed obstacles, inflated by the
 //! sTEB, in the plane or in space. Any planner fits behind [`RawPathPlanner`]; the default is A* on a grid of
-//! cells (squares or cubes; the `pathfinding` crate) with the path shortened by line of sight.
+//! cells (squares or cubes) with the path shortened by line of sight.
 
 use crate::geometry::{chebyshev_norm, clearance, inside, lerp, norm, segment_is_free, sub, Obstacle, Point};
 use fastrack_proto::planner_speed::{SpeedRow, SpeedRule};
@@ -172,16 +172,41 @@ impl<'r, O: Obstacle<D>, const D: usize> CellGrid<'r, O, D> {
     /// The distance from the cell's centre to the nearest obstacle, measured once for a cell of the grid.
     pub(crate) fn cell_clearance(&self, c: Cell<D>) -> f64 {
         let measure = || clearance(self.request.obstacles, self.centre(c));
-        let on_grid = (0..D).all(|axis| c[axis] >= 0 && c[axis] < self.counts[axis]);
-        let Some(known) = self.clearances.as_ref().filter(|_| on_grid) else {
+        let (Some(known), Some(index)) = (self.clearances.as_ref(), self.number(c)) else {
             return measure();
         };
-        let index = (0..D).fold(0, |index, axis| index * self.counts[axis] + c[axis]) as usize;
+        let index = index as usize;
         let mut known = known.borrow_mut();
         if known[index].is_nan() {
             known[index] = measure();
         }
         known[index]
+    }
+
+    /// The cell's number, the first axis slowest, if it lies on the grid.
+    fn number(&self, c: Cell<D>) -> Option<u64> {
+        self.on_grid(c).then(|| (0..D).fold(0, |number, axis| number * self.counts[axis] + c[axis]) as u64)
+    }
+
+    /// The cell numbered `number`.
+    fn cell_numbered(&self, number: u64) -> Cell<D> {
+        let mut rest = number as i64;
+        let mut cell = [0; D];
+        for axis in (0..D).rev() {
+            cell[axis] = rest % self.counts[axis];
+            rest /= self.counts[axis];
+        }
+        cell
+    }
+
+    /// The number of cells on the grid.
+    fn cell_count(&self) -> u64 {
+        self.counts.iter().map(|&n| n as u64).product()
+    }
+
+    /// Within the grid's cells.
+    fn on_grid(&self, c: Cell<D>) -> bool {
+        (0..D).all(|axis| c[axis] >= 0 && c[axis] < self.counts[axis])
     }
 
     /// The cell's centre is [`CellGrid::free`].
@@ -202,7 +227,7 @@ impl<'r, O: Obstacle<D>, const D: usize> CellGrid<'r, O, D> {
     /// along a segment that keeps the inflation; from a cell within the inflation (the planner's cell rounded
     /// towards an obstacle, or a planner the map grew around), only a step that strictly gains clearance.
     fn step_free(&self, a: Cell<D>, b: Cell<D>) -> bool {
-        if !(0..D).all(|axis| b[axis] >= 0 && b[axis] < self.counts[axis]) {
+        if !self.on_grid(b) {
             return false;
         }
         let goal = self.goal;
@@ -233,23 +258,28 @@ impl<'r, O: Obstacle<D>, const D: usize> CellGrid<'r, O, D> {
     ) -> Result<Vec<Point<D>>, PlanError> {
         let request = self.request;
         let (start, goal) = (self.cell_of(request.start), self.goal);
-        let successors = |&a: &Cell<D>| {
-            let mut next = Vec::with_capacity(self.neighbours.len());
+        // A start off the grid (a planner just outside the workspace) takes the number after the grid's.
+        let off_grid = self.cell_count();
+        let number = |c: Cell<D>| self.number(c).unwrap_or(off_grid);
+        let cell = |number: u64| if number == off_grid { start } else { self.cell_numbered(number) };
+        let successors = |from: u64, next: &mut Vec<(u64, u64)>| {
+            let a = cell(from);
             for offset in &self.neighbours {
                 let b = std::array::from_fn(|axis| a[axis] + offset[axis]);
                 if self.step_free(a, b) {
-                    next.push((b, step_cost(a, b)));
+                    next.push((number(b), step_cost(a, b)));
                 }
             }
-            next
         };
         let no_path = || PlanError::NoPath {
             start: request.start.to_vec(),
             goal: request.goal.to_vec(),
             inflation: request.inflation,
         };
-        let (cells, _) = pathfinding::directed::astar::astar(&start, successors, |a| heuristic(*a), |&a| a == goal)
-            .ok_or_else(no_path)?;
+        let numbers =
+            crate::cell_astar::astar(off_grid + 1, number(start), number(goal), successors, |n| heuristic(cell(n)))
+                .ok_or_else(no_path)?;
+        let cells: Vec<Cell<D>> = numbers.into_iter().map(cell).collect();
         let mut points: Vec<Point<D>> = cells.iter().map(|&c| self.centre(c)).collect();
         points[0] = request.start;
         *points.last_mut().expect("a path holds its goal") = request.goal;
