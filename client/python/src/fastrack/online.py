@@ -412,7 +412,7 @@ class GridAStar:
             dx, dy = abs(a[0] - b[0]), abs(a[1] - b[1])
             return int((max(dx, dy) + (math.sqrt(2.0) - 1.0) * min(dx, dy)) * cell * _COST_SCALE)
 
-        # A* as the `pathfinding` crate runs it: the smallest estimate first, then the largest cost so far.
+        # A* as the Rust grid planner runs it: the smallest estimate first, then the largest cost so far.
         costs: dict[tuple[int, int], int] = {start_cell: 0}
         parents: dict[tuple[int, int], tuple[int, int]] = {}
         order = 0
