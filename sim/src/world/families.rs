@@ -91,13 +91,14 @@ pub struct WorldSpec<const D: usize> {
 }
 
 impl<const D: usize> Default for WorldSpec<D> {
-    /// A scattered world 30 m by 20 m (by 6 m high in space).
+    /// A scattered world 30 m by 20 m (by 10 m high in space: the quadcopter's bound at `beta_u` is about
+    /// 4.5 m, so a lower world leaves FaSTrack at `beta_u` no free space between floor and ceiling).
     fn default() -> Self {
         const { assert!(D == 2 || D == 3, "worlds lie in the plane or in space") };
         Self {
             seed: 1,
             family: WorldFamily::Scattered,
-            size: std::array::from_fn(|axis| [30.0, 20.0, 6.0][axis]),
+            size: std::array::from_fn(|axis| [30.0, 20.0, 10.0][axis]),
             density: 2.0,
             size_range: (0.4, 1.5),
             inflation: 1.0,
@@ -345,10 +346,10 @@ mod tests {
             let world: World<SpaceObstacle, 3> = spec(family, 1).generate().unwrap_or_else(|e| panic!("{family}: {e}"));
             assert_eq!(world, spec(family, 1).generate().unwrap(), "{family}: same seed, same world");
             world.check_feasible(inflation).unwrap();
-            assert_eq!((world.start, world.goal), ([2.0, 10.0, 3.0], [28.0, 10.0, 3.0]));
+            assert_eq!((world.start, world.goal), ([2.0, 10.0, 5.0], [28.0, 10.0, 5.0]));
             assert_eq!(world.start_speed, 0.0, "a quadcopter starts hovering");
             let (enclosure, own) = world.obstacles.split_at(2);
-            assert_eq!(enclosure, [SpaceObstacle::Floor { height: 0.0 }, SpaceObstacle::Ceiling { height: 6.0 }]);
+            assert_eq!(enclosure, [SpaceObstacle::Floor { height: 0.0 }, SpaceObstacle::Ceiling { height: 10.0 }]);
             let n = own.len();
             match family {
                 WorldFamily::Scattered => assert_eq!(n, 12, "2 per 100 m^2 of 600 m^2 of ground"),

@@ -113,7 +113,7 @@ impl Simulation {
 /// How generated worlds look.
 #[derive(clap::Args, serde::Serialize, serde::Deserialize)]
 struct Generation {
-    /// Workspace width and depth, and height for a model flying in space (m); default 30,20 (30,20,6).
+    /// Workspace width and depth, and height for a model flying in space (m); default 30,20 (30,20,10).
     #[arg(long, value_delimiter = ',', num_args = 1)]
     #[serde(default)]
     size: Vec<f64>,
