@@ -109,6 +109,13 @@ pub(crate) struct CellGrid<'r, O, const D: usize> {
     clearances: Option<RefCell<Vec<f64>>>,
 }
 
+/// A cell a search expands: whether it is free (or the goal) and its clearance.
+struct Leaving<const D: usize> {
+    cell: Cell<D>,
+    free: bool,
+    clearance: f64,
+}
+
 /// Most cells whose clearances a grid remembers (32 MiB of them); a larger grid measures each time.
 const MAX_REMEMBERED_CELLS: i64 = 1 << 22;
 
@@ -214,28 +221,36 @@ impl<'r, O: Obstacle<D>, const D: usize> CellGrid<'r, O, D> {
         self.inside(self.centre(c)) && self.cell_clearance(c) > self.request.inflation
     }
 
-    /// Whether the segment between the centres of the touching cells `a` and `b` keeps more than `inflation`
-    /// from every obstacle: at once when their clearances exceed it by half the segment (every point of it
-    /// lies within that of an end, and a distance changes no faster than the point), else measured.
-    fn step_keeps(&self, a: Cell<D>, b: Cell<D>, inflation: f64) -> bool {
-        let (from, to) = (self.centre(a), self.centre(b));
-        self.cell_clearance(a).min(self.cell_clearance(b)) - norm(sub(to, from)) / 2.0 > inflation
-            || segment_is_free(self.request.obstacles, from, to, inflation)
+    /// What a search needs to know of the cell it expands, measured once for all the cell's neighbours.
+    fn leaving(&self, a: Cell<D>) -> Leaving<D> {
+        Leaving { cell: a, free: self.cell_free(a) || a == self.goal, clearance: self.cell_clearance(a) }
     }
 
-    /// Whether the step from cell `a` to its neighbour `b` is allowed: between free cells (or onto the goal)
-    /// along a segment that keeps the inflation; from a cell within the inflation (the planner's cell rounded
-    /// towards an obstacle, or a planner the map grew around), only a step that strictly gains clearance.
-    fn step_free(&self, a: Cell<D>, b: Cell<D>) -> bool {
+    /// Whether the segment between the centres of the touching cells `from` and `b` (`b` at `b_clearance`)
+    /// keeps more than `inflation` from every obstacle: at once when their clearances exceed it by half the
+    /// segment (every point of it lies within that of an end, and a distance changes no faster than the
+    /// point), else measured.
+    fn step_keeps(&self, from: &Leaving<D>, b: Cell<D>, b_clearance: f64, inflation: f64) -> bool {
+        let (from_centre, to) = (self.centre(from.cell), self.centre(b));
+        from.clearance.min(b_clearance) - norm(sub(to, from_centre)) / 2.0 > inflation
+            || segment_is_free(self.request.obstacles, from_centre, to, inflation)
+    }
+
+    /// Whether the step from cell `from` to its neighbour `b` is allowed: between free cells (or onto the
+    /// goal) along a segment that keeps the inflation; from a cell within the inflation (the planner's cell
+    /// rounded towards an obstacle, or a planner the map grew around), only a step that strictly gains
+    /// clearance.
+    fn step_free(&self, from: &Leaving<D>, b: Cell<D>) -> bool {
         if !self.on_grid(b) {
             return false;
         }
-        let goal = self.goal;
-        if self.cell_free(a) || a == goal {
-            (self.cell_free(b) || b == goal) && self.step_keeps(a, b, self.request.inflation)
+        let b_clearance = self.cell_clearance(b);
+        let b_inside = self.inside(self.centre(b));
+        let inflation = self.request.inflation;
+        if from.free {
+            (b_inside && b_clearance > inflation || b == self.goal) && self.step_keeps(from, b, b_clearance, inflation)
         } else {
-            let here = self.cell_clearance(a);
-            self.inside(self.centre(b)) && self.cell_clearance(b) > here && self.step_keeps(a, b, here - 1e-9)
+            b_inside && b_clearance > from.clearance && self.step_keeps(from, b, b_clearance, from.clearance - 1e-9)
         }
     }
 
@@ -264,9 +279,10 @@ impl<'r, O: Obstacle<D>, const D: usize> CellGrid<'r, O, D> {
         let cell = |number: u64| if number == off_grid { start } else { self.cell_numbered(number) };
         let successors = |from: u64, next: &mut Vec<(u64, u64)>| {
             let a = cell(from);
+            let leaving = self.leaving(a);
             for offset in &self.neighbours {
                 let b = std::array::from_fn(|axis| a[axis] + offset[axis]);
-                if self.step_free(a, b) {
+                if self.step_free(&leaving, b) {
                     next.push((number(b), step_cost(a, b)));
                 }
             }
