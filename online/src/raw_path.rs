@@ -421,6 +421,17 @@ mod tests {
     }
 
     #[test]
+    fn a_start_just_outside_the_workspace_steps_in_away_from_an_obstacle() {
+        // The start's cell lies one cell left of the grid; a disc beyond it makes the step in a gain in
+        // clearance, so the path enters the grid and goes on to the goal.
+        let obstacles = [PlaneObstacle::Circle { center: [-5.0, 0.0], radius: 1.0 }];
+        let outside = PlanRequest { start: [-1.1, 0.0], ..request(&obstacles, 0.5) };
+        let path = GridAStar::default().plan(&outside).unwrap();
+        assert_eq!((path[0], *path.last().unwrap()), ([-1.1, 0.0], [10.0, 0.0]));
+        assert!(path[1..].iter().all(|&p| inside(p, outside.bounds)), "{path:?}");
+    }
+
+    #[test]
     fn a_wall_across_the_workspace_or_a_blocked_goal_is_reported() {
         let wall = [PlaneObstacle::Wall { from: [5.0, -7.0], to: [5.0, 7.0], thickness: 0.2 }];
         assert!(matches!(GridAStar::default().plan(&request(&wall, 0.3)), Err(PlanError::NoPath { .. })));
