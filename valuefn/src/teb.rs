@@ -48,7 +48,8 @@ pub struct TebOptions {
     pub refine_iters: usize,
     /// Directions for boundary radii in 2-D error spaces.
     pub boundary_directions: usize,
-    /// Samples of the non-error coordinates per boundary probe.
+    /// Uniform non-error states per boundary probe (as many again about the resting state, for a system
+    /// that rests).
     pub boundary_samples: usize,
     /// Random seed.
     pub seed: u64,
@@ -142,9 +143,30 @@ pub(crate) fn minimise(
     Ok((current[best], points[best * n_state..(best + 1) * n_state].to_vec()))
 }
 
+/// Non-error states a shape probe pairs with each error (whole states; the probe overwrites their error
+/// coordinates): `m` uniform over the domain and, for a system that rests, its resting state and `m` states
+/// scattered about it (each coordinate within a tenth of its range). In many dimensions uniform states almost
+/// never lie in a set, while the resting state lies in every set the table certifies.
+fn probe_states(system: &AffineSystem, m: usize, rng: &mut impl Rng) -> Vec<f64> {
+    let mut states = uniform_states(system, m, rng);
+    if let Some(rest) = system.resting_state() {
+        states.extend_from_slice(&rest);
+        for _ in 0..m {
+            let mut r: Vec<f64> = rest
+                .iter()
+                .zip(&system.state)
+                .map(|(x, d)| x + 0.1 * (d.max - d.min) * rng.random_range(-1.0..1.0))
+                .collect();
+            project(system, &mut r);
+            states.extend(r);
+        }
+    }
+    states
+}
+
 /// Extent and boundary radii of `{r : V(r) <= level}` projected onto the error coordinates: per direction,
-/// the largest radius (bisection from the level, which bounds it since `V >= |e|`) at which some sampled
-/// non-error state keeps `V <= level`.
+/// the largest radius (bisection from the level, which bounds it since `V >= |e|`) at which some probe
+/// state ([`probe_states`]) keeps `V <= level`.
 fn error_set_shape(
     oracle: &dyn ValueOracle,
     system: &AffineSystem,
@@ -166,9 +188,9 @@ fn error_set_shape(
         })
         .collect();
     let all: Vec<&Vec<f64>> = directions.iter().chain(axis_directions.iter()).collect();
-    let m = options.boundary_samples;
-    let others = uniform_states(system, m, rng);
-    let batch_params: Vec<f64> = params.iter().copied().cycle().take(m * params.len()).collect();
+    let others = probe_states(system, options.boundary_samples, rng);
+    let probes = others.len() / n_state;
+    let batch_params: Vec<f64> = params.iter().copied().cycle().take(probes * params.len()).collect();
     let mut radii = Vec::with_capacity(all.len());
     for direction in all {
         let (mut lo, mut hi) = (0.0, level);

@@ -1,10 +1,11 @@
 //! The TEB table refuses a value function with a negative minimum, saying where it is: no tracking value
 //! function has one (`V >= l >= 0`), and the state tells the model's author which region was not learned.
-//! Its levels hold the resting state of a system that has one, and the sets' overlap is measured.
+//! Its levels hold the resting state of a system that has one, the sets' overlap is measured, and so is the
+//! shape of a set too thin in many dimensions for uniform states to land in.
 
 use fastrack_valuefn::manifest::TebRow;
 use fastrack_valuefn::system::{double_integrator, quad10d};
-use fastrack_valuefn::teb::{nested_shares, teb_table, TebOptions, ValueOracle};
+use fastrack_valuefn::teb::{nested_shares, reshape_at_set_levels, teb_table, TebOptions, ValueOracle};
 use rand::SeedableRng;
 
 /// `V(r) = |r - c|^2 - 1`: negative around `c`, least (-1) at `c`.
@@ -106,5 +107,47 @@ fn every_level_holds_the_hovering_state() {
         assert!(row.measured_min >= row.beta && row.measured_min < at_rest, "{row:?}");
         assert!(before < at_rest && (at_rest - 1.09 * row.beta).abs() < 1e-12, "{before} {at_rest}");
         assert_eq!(row.level, at_rest);
+    }
+}
+
+/// `V(r) = 0.1 + sqrt(|e|^2 + sum_i (r_i / s_i)^2)` on quad10d, `e` the position errors and `s_i` a
+/// twentieth of each other coordinate's half-range: `V >= |e|`, and at level 1 the set reaches 0.9 m along
+/// each error axis (at rest), while a uniform state's velocities, tilts and rates almost surely put it outside.
+struct ThinSet;
+
+impl ValueOracle for ThinSet {
+    fn values_and_grads(&self, states: &[f64], _params: &[f64]) -> Result<(Vec<f64>, Vec<f64>), String> {
+        let system = quad10d::system();
+        let values = states
+            .chunks(10)
+            .map(|r| {
+                let squares = r.iter().zip(&system.state).enumerate().map(|(i, (x, d))| {
+                    let scale = if system.error_coords.contains(&i) { 1.0 } else { (d.max - d.min) / 40.0 };
+                    (x / scale).powi(2)
+                });
+                0.1 + squares.sum::<f64>().sqrt()
+            })
+            .collect();
+        Ok((values, vec![0.0; states.len()]))
+    }
+}
+
+#[test]
+fn a_thin_set_in_many_dimensions_is_measured_from_the_resting_state() {
+    let row = |beta: f64| TebRow {
+        beta,
+        level: 1.0,
+        measured_min: 0.1,
+        extent: vec![0.0; 3],
+        boundary_radii: Vec::new(),
+        verification: None,
+        nested_share: None,
+        reference: None,
+    };
+    let mut rows = [row(0.5), row(1.5)];
+    reshape_at_set_levels(&ThinSet, &quad10d::system(), &mut rows, &TebOptions::default()).unwrap();
+    for row in &rows {
+        // Bisection from the level in 10 halvings: within 1/1024 below the true 0.9.
+        assert!(row.extent.iter().all(|&e| (0.9 - 1.0 / 1024.0..=0.9).contains(&e)), "{:?}", row.extent);
     }
 }
