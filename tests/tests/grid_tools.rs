@@ -98,8 +98,23 @@ async fn compare_and_verify_read_a_diagonal_bundle() {
         .find(|p| p.extension().is_some_and(|e| e == "ftgrid"))
         .expect("compare's solution in the store");
     let verified_dir = verified.join("tiny-d4").join("1");
-    let reference = ["reference", "--bundle", path(&verified_dir), "--grid-solutions", path(&solution)];
-    run("fastrack-grid", &[&reference[..], &["--out", path(&verified)]].concat());
+    let verification_record = results.join("tiny-verify.json");
+    let reference = [
+        "reference",
+        "--bundle",
+        path(&verified_dir),
+        "--grid-solutions",
+        path(&solution),
+        "--out",
+        path(&verified),
+        "--record",
+        "tiny-reference",
+        "--verification-record",
+        path(&verification_record),
+        "--results-dir",
+        path(&results),
+    ];
+    run("fastrack-grid", &reference);
     let manifest = Bundle::load(&verified_dir).unwrap().manifest;
     assert!(manifest.teb_table.iter().all(|row| row.verification.is_some()), "the verifications are kept");
     for row in &manifest.teb_table {
@@ -111,6 +126,30 @@ async fn compare_and_verify_read_a_diagonal_bundle() {
             None => assert!(row.beta > 0.8, "beta {} has no reference", row.beta),
         }
     }
+    // Its record puts each row's served bound beside the reference, with the wall time of every stage: the
+    // training (the bundle's provenance), the solve (the solution's own) and each row's verification (the
+    // verification record's).
+    let record: serde_json::Value =
+        serde_json::from_str(&std::fs::read_to_string(results.join("tiny-reference.json")).unwrap()).unwrap();
+    let verify_rows: serde_json::Value =
+        serde_json::from_str::<serde_json::Value>(&std::fs::read_to_string(&verification_record).unwrap()).unwrap()
+            ["figures"]["rows"]
+            .clone();
+    let figures = &record["figures"];
+    for (got, row) in figures["rows"].as_array().unwrap().iter().zip(&manifest.teb_table) {
+        assert_eq!(got["bound"].as_f64(), Some(row.bound()), "beta {}", row.beta);
+        let ratio = row.reference.as_ref().map(|r| row.bound() / r.bound);
+        assert_eq!(got["served_over_reference"].as_f64(), ratio, "beta {}", row.beta);
+        assert!(ratio.is_none_or(|r| r >= 1.0), "the bound never undercuts its reference: {got}");
+        let wall = verify_rows.as_array().unwrap().iter().find(|v| v["beta"].as_f64() == Some(row.beta)).unwrap();
+        assert_eq!(got["verification_wall_s"], wall["wall_s"], "beta {}", row.beta);
+    }
+    let solved = fastrack_gridfile::format::load(&solution).unwrap();
+    assert_eq!(figures["solves"][0]["wall_s"].as_f64(), Some(solved.info.wall_s));
+    assert_eq!(figures["stages"]["training_s"].as_f64(), Some(manifest.provenance.wall_time_s));
+    assert!(manifest.provenance.wall_time_s > 0.0, "the training's wall time is recorded");
+    let rows_wall: f64 = verify_rows.as_array().unwrap().iter().map(|v| v["wall_s"].as_f64().unwrap()).sum();
+    assert_eq!(figures["stages"]["verification_s"].as_f64(), Some(rows_wall));
 
     // GetModel serves every figure of each row's verification and reference, as the manifest holds it.
     let (_server, client) = TestServer::start_serving(&verified).await;
