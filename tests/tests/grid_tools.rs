@@ -136,6 +136,7 @@ async fn compare_and_verify_read_a_diagonal_bundle() {
             ["figures"]["rows"]
             .clone();
     let figures = &record["figures"];
+    assert_eq!(figures["rows"].as_array().unwrap().len(), manifest.teb_table.len(), "one record row per table row");
     for (got, row) in figures["rows"].as_array().unwrap().iter().zip(&manifest.teb_table) {
         assert_eq!(got["bound"].as_f64(), Some(row.bound()), "beta {}", row.beta);
         let ratio = row.reference.as_ref().map(|r| row.bound() / r.bound);
